@@ -1,0 +1,58 @@
+// One depth map from a reference view and its source views: resizes/crops the images to the
+// network size (intrinsics kept consistent), builds the projection matrices and the depth
+// hypotheses, runs MVSNet without gradients. Shared by `umvs infer` and the inference nodelet.
+#pragma once
+
+#include <torch/types.h>
+
+#include <vector>
+
+#include "unsup_mvs/core/camera.h"
+#include "unsup_mvs/core/mvsnet.h"
+
+namespace umvs {
+
+struct ViewInput {
+  torch::Tensor image;  // uint8 [H,W,3] RGB
+  Camera camera;        // width/height must match the image
+};
+
+struct DepthEstimatorConfig {
+  int max_width = 0;   // 0 = no limit; images are scaled down to fit, then cropped to multiples of 32
+  int max_height = 0;
+  int num_depth = 0;   // 0 = the model's config
+};
+
+struct DepthMap {
+  torch::Tensor depth;       // [h,w] float32 metres, CPU (h, w = network input / 4)
+  torch::Tensor confidence;  // [h,w] float32 in [0,1], CPU
+  torch::Tensor color;       // [h,w,3] uint8: the reference image at the depth pixels
+  Camera camera;             // camera of the depth map: pixel (i,j) <-> network input pixel (4i,4j)
+  Camera network_camera;     // camera of the network input image (after resize and crop)
+  double depth_min = 0.0, depth_max = 0.0;
+  double seconds = 0.0;      // network time, including transfers
+};
+
+class DepthEstimator {
+ public:
+  DepthEstimator(MvsNet model, torch::Device device, DepthEstimatorConfig config = {});
+
+  // views[0] is the reference. Throws std::invalid_argument naming the problem for an impossible
+  // depth range, invalid cameras, mismatched image sizes or fewer than 2 views.
+  DepthMap estimate(const std::vector<ViewInput>& views, double depth_min, double depth_max);
+
+  MvsNet& model() { return model_; }
+  const torch::Device& device() const { return device_; }
+  const DepthEstimatorConfig& config() const { return config_; }
+  int num_depth() const;
+
+ private:
+  MvsNet model_;
+  torch::Device device_;
+  DepthEstimatorConfig config_;
+};
+
+// The depth-map camera for MVSNet's 1/4-resolution output (naive scaling, as the network's warp).
+Camera depth_map_camera(const Camera& network_camera, double scale = 0.25);
+
+}  // namespace umvs

@@ -1,0 +1,68 @@
+// Tensor geometry shared by the cost-volume warp (no gradient needed) and the photometric loss's
+// inverse warp (gradients flow into depth). Both start from `project_to_source`.
+#pragma once
+
+#include <torch/types.h>
+
+#include <vector>
+
+#include "unsup_mvs/core/camera.h"
+
+namespace umvs {
+
+enum class DepthSampling {
+  kUniformDepth,         // MVSNet: planes evenly spaced in depth (good for object-scale ranges)
+  kUniformInverseDepth,  // evenly spaced in 1/depth (robot scenes spanning 0.5 m to tens of m)
+};
+const char* to_string(DepthSampling s);
+DepthSampling depth_sampling_from_string(const std::string& s);  // "depth" | "inverse_depth"
+
+// D increasing depth hypotheses in [depth_min, depth_max], computed in float64 and rounded once
+// to float32 (MVSNet's exact values for uniform sampling). Throws std::invalid_argument on
+// non-positive, non-finite or empty ranges or D < 2.  -> [D] float32
+torch::Tensor depth_hypotheses(double depth_min, double depth_max, int num_depth,
+                               DepthSampling sampling);
+
+// 4x4 [[K' R, K' t], [0 0 0 1]] with K' = K whose first two rows are multiplied by `scale`:
+// MVSNet's naive feature-map scaling (feature pixel (i, j) sits on image pixel (i/scale, j/scale)),
+// which the published weights were trained with.  -> [4,4] float32
+torch::Tensor mvsnet_projection_matrix(const Camera& camera, double scale = 0.25);
+// Stacked for several views.  -> [V,4,4] float32
+torch::Tensor mvsnet_projection_matrices(const std::vector<Camera>& cameras, double scale = 0.25);
+
+// Intrinsics and relative pose as tensors for the inverse warp.
+torch::Tensor intrinsics_tensor(const Camera& camera);                         // [3,3] float32
+torch::Tensor relative_pose_tensor(const Camera& ref, const Camera& src);      // [4,4] T_src_ref
+
+// Pixel coordinates of every reference pixel with depth `depth` moved into the source camera.
+//   K_ref, K_src: [B,3,3]; T_src_ref: [B,4,4]; depth: [B,H,W]
+//   -> uv [B,H,W,2] (source pixel, column then row), z [B,H,W] (depth in the source camera)
+struct SourceProjection {
+  torch::Tensor uv;
+  torch::Tensor z;
+};
+SourceProjection project_to_source(const torch::Tensor& K_ref, const torch::Tensor& K_src,
+                                   const torch::Tensor& T_src_ref, const torch::Tensor& depth);
+
+// MVSNet's differentiable homography warp of source features into the reference frustum.
+//   src_features [B,C,H,W]; src_proj, ref_proj [B,4,4] (mvsnet_projection_matrix at feature
+//   resolution); depth_values [B,D]  -> [B,C,D,H,W], zero outside the source image.
+// Bit-compatible with MVSNet_pytorch as run on torch >= 1.3 (grid normalised by (W-1)/2,
+// grid_sample with align_corners = false).
+torch::Tensor homography_warp(const torch::Tensor& src_features, const torch::Tensor& src_proj,
+                              const torch::Tensor& ref_proj, const torch::Tensor& depth_values);
+
+// Inverse warp for the photometric loss: sample `src_image` at the source pixel of every
+// reference pixel with depth `depth` (bilinear, pixel-centre convention). Gradients flow into
+// depth (and the image).
+//   src_image [B,C,H,W]; K_ref, K_src [B,3,3]; T_src_ref [B,4,4]; depth [B,H,W] (> 0)
+//   -> warped [B,C,H,W], valid [B,1,H,W] float (inside the source image and positive depth)
+struct InverseWarp {
+  torch::Tensor warped;
+  torch::Tensor valid;
+};
+InverseWarp inverse_warp(const torch::Tensor& src_image, const torch::Tensor& K_ref,
+                         const torch::Tensor& K_src, const torch::Tensor& T_src_ref,
+                         const torch::Tensor& depth);
+
+}  // namespace umvs

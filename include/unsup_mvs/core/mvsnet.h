@@ -1,0 +1,141 @@
+// MVSNet (Yao et al. 2018) in LibTorch. Module names follow MVSNet_pytorch (xy-guo), so its
+// published weights import one-to-one (io/checkpoint.h).
+#pragma once
+
+#include <torch/nn/module.h>
+#include <torch/nn/modules/batchnorm.h>
+#include <torch/nn/modules/container/sequential.h>
+#include <torch/nn/modules/conv.h>
+#include <torch/nn/pimpl.h>
+
+#include <string>
+#include <vector>
+
+#include "unsup_mvs/core/geometry.h"
+
+namespace umvs {
+
+struct MvsNetConfig {
+  // Depth hypotheses per reference view. The U-Net needs a multiple of 8. Not a property of the
+  // weights: a model trained with 128 planes can run with 192 or 64.
+  int num_depth = 128;
+  DepthSampling depth_sampling = DepthSampling::kUniformDepth;
+  // Refinement network (depth residual from the reference image and the initial depth).
+  bool refine = false;
+  // Views the network sees per depth map (reference + sources). Any V >= 2 works at inference.
+  int num_views = 3;
+
+  // Throws std::invalid_argument naming the bad field.
+  void validate() const;
+  // Fields that change the set of weights (only `refine`); a checkpoint whose architecture
+  // differs from the requested one cannot be loaded. Returns "" when compatible, else a message.
+  std::string architecture_mismatch(const MvsNetConfig& other) const;
+  std::string to_string() const;
+};
+
+// Conv + BatchNorm + ReLU (2-D or 3-D), as MVSNet_pytorch's ConvBnReLU / ConvBnReLU3D.
+class ConvBnReLUImpl : public torch::nn::Module {
+ public:
+  ConvBnReLUImpl(int in, int out, int kernel = 3, int stride = 1, int pad = 1);
+  torch::Tensor forward(const torch::Tensor& x);
+  torch::nn::Conv2d conv{nullptr};
+  torch::nn::BatchNorm2d bn{nullptr};
+};
+TORCH_MODULE(ConvBnReLU);
+
+class ConvBnReLU3DImpl : public torch::nn::Module {
+ public:
+  ConvBnReLU3DImpl(int in, int out, int kernel = 3, int stride = 1, int pad = 1);
+  torch::Tensor forward(const torch::Tensor& x);
+  torch::nn::Conv3d conv{nullptr};
+  torch::nn::BatchNorm3d bn{nullptr};
+};
+TORCH_MODULE(ConvBnReLU3D);
+
+// 2-D feature extractor: [B,3,H,W] in [0,1] -> [B,32,H/4,W/4].
+class FeatureNetImpl : public torch::nn::Module {
+ public:
+  FeatureNetImpl();
+  torch::Tensor forward(const torch::Tensor& image);
+  static constexpr int kChannels = 32;
+
+ private:
+  std::vector<ConvBnReLU> layers_;  // conv0 .. conv6
+  torch::nn::Conv2d feature_{nullptr};
+};
+TORCH_MODULE(FeatureNet);
+
+// 3-D U-Net regularising the variance cost volume: [B,32,D,h,w] -> logits [B,D,h,w].
+class CostRegNetImpl : public torch::nn::Module {
+ public:
+  CostRegNetImpl();
+  torch::Tensor forward(const torch::Tensor& cost);
+
+ private:
+  ConvBnReLU3D conv0_{nullptr}, conv1_{nullptr}, conv2_{nullptr}, conv3_{nullptr},
+      conv4_{nullptr}, conv5_{nullptr}, conv6_{nullptr};
+  torch::nn::Sequential conv7_{nullptr}, conv9_{nullptr}, conv11_{nullptr};
+  torch::nn::Conv3d prob_{nullptr};
+};
+TORCH_MODULE(CostRegNet);
+
+// Depth residual from the reference image and the initial depth, both at 1/4 resolution.
+// The depth is normalised by the depth range before and the residual scaled back after.
+class RefineNetImpl : public torch::nn::Module {
+ public:
+  RefineNetImpl();
+  // image [B,3,h,w]; depth [B,h,w]; depth_min/depth_max [B]  -> refined depth [B,h,w]
+  torch::Tensor forward(const torch::Tensor& image, const torch::Tensor& depth,
+                        const torch::Tensor& depth_min, const torch::Tensor& depth_max);
+
+ private:
+  ConvBnReLU conv1_{nullptr}, conv2_{nullptr}, conv3_{nullptr};
+  torch::nn::Conv2d res_{nullptr};
+};
+TORCH_MODULE(RefineNet);
+
+struct MvsOutput {
+  torch::Tensor depth;        // [B,H/4,W/4] metres (refined when the network refines)
+  torch::Tensor confidence;   // [B,H/4,W/4] probability mass of the 4 planes around the estimate
+  torch::Tensor depth_init;   // [B,H/4,W/4] before refinement (== depth without refinement)
+  torch::Tensor prob_volume;  // [B,D,H/4,W/4] (only when asked for)
+};
+
+class MvsNetImpl : public torch::nn::Module {
+ public:
+  explicit MvsNetImpl(const MvsNetConfig& config = {});
+
+  // images [B,V,3,H,W] in [0,1], view 0 the reference, H and W multiples of 32;
+  // proj [B,V,4,4] mvsnet_projection_matrices (feature scale 0.25); depth_values [B,D] increasing.
+  MvsOutput forward(const torch::Tensor& images, const torch::Tensor& proj,
+                    const torch::Tensor& depth_values, bool keep_prob_volume = false);
+
+  const MvsNetConfig& config() const { return config_; }
+  // The hypotheses count used by forward() is taken from depth_values; this only updates the
+  // config that is saved with checkpoints and used by callers to build depth_values.
+  void set_num_depth(int d) { config_.num_depth = d; }
+  void set_depth_sampling(DepthSampling s) { config_.depth_sampling = s; }
+
+  FeatureNet feature{nullptr};
+  CostRegNet cost_regularization{nullptr};
+  RefineNet refine_network{nullptr};  // null unless config.refine
+
+ private:
+  MvsNetConfig config_;
+};
+TORCH_MODULE(MvsNet);
+
+// Soft-argmin and the photometric confidence of a probability volume.
+//   prob [B,D,h,w] (softmax over D); depth_values [B,D]  -> depth [B,h,w], confidence [B,h,w]
+// confidence = prob[i-1] + prob[i] + prob[i+1] + prob[i+2] at i = floor(sum_d prob[d] * d),
+// planes outside [0, D-1] counting as 0 (MVSNet_pytorch's photometric_confidence).
+torch::Tensor expected_depth(const torch::Tensor& prob, const torch::Tensor& depth_values);
+torch::Tensor photometric_confidence(const torch::Tensor& prob);
+
+}  // namespace umvs
+
+namespace umvs {
+// Floating-point operations (2 x multiply-accumulates of the convolutions; warping and softmax
+// are small in comparison and not counted) of one forward pass for V views of H x W with D planes.
+double mvsnet_forward_flops(int height, int width, int num_depth, int num_views, bool refine = false);
+}  // namespace umvs

@@ -1,0 +1,44 @@
+// Model files.
+//  * Our checkpoint: one file (torch pickle, readable with torch.load in Python) holding the
+//    network config, the weights and, for training, the optimiser state, the step, the RNG state
+//    and metrics. A checkpoint never loads into a network of another shape silently.
+//  * MVSNet_pytorch weights (a plain state dict, e.g. ../shared/data/mvsnet_parity/): imported by
+//    name and shape; any missing, extra or mis-shaped tensor is an error naming it.
+#pragma once
+
+#include <map>
+#include <string>
+
+#include "unsup_mvs/core/mvsnet.h"
+
+namespace umvs {
+
+struct CheckpointMeta {
+  int64_t step = 0;
+  std::string optimizer_state;  // serialised torch::optim archive (empty: none)
+  std::string rng_state;        // serialised generator state (empty: none)
+  std::map<std::string, double> metrics;
+};
+
+// Atomic: a failed save leaves an existing file at `path` untouched.
+void save_checkpoint(const std::string& path, MvsNet& model, const CheckpointMeta& meta = {});
+
+struct LoadedModel {
+  MvsNet model{nullptr};
+  CheckpointMeta meta;
+  std::string format;  // "unsup_mvs" or "mvsnet_pytorch"
+};
+
+// Loads either format (detected from the content) onto `device`, in eval() mode.
+// `expected` (optional) is the architecture the caller needs; a checkpoint of another
+// architecture is refused with a message naming the mismatch. For MVSNet_pytorch weights, which
+// carry no config, `expected` (or the defaults) gives the config.
+// Throws std::runtime_error naming the file for a missing, corrupt or unfitting file.
+LoadedModel load_model(const std::string& path, const torch::Device& device,
+                       const MvsNetConfig* expected = nullptr);
+
+// Copies a name -> tensor dictionary into the module's parameters and buffers. Throws
+// std::runtime_error listing missing, unexpected and mis-shaped entries; `source` names the file.
+void load_state_dict(torch::nn::Module& module, const c10::impl::GenericDict& dict, const std::string& source);
+
+}  // namespace umvs

@@ -1,0 +1,15 @@
+// Shared pieces of `umvs bench` cases.
+#pragma once
+
+#include <vector>
+
+namespace umvs {
+
+struct BenchStats {
+  int runs = 0;
+  double median = 0, min = 0, max = 0;  // seconds
+};
+BenchStats summarize(std::vector<double> seconds);
+double peak_rss_mib();  // peak resident memory of this process (VmHWM)
+
+}  // namespace umvs

@@ -1,0 +1,48 @@
+#!/usr/bin/env bash
+# Installs everything unsup_mvs needs from Debian 12's apt. Idempotent: when every package is
+# already installed it returns in about a second without touching apt.
+#   scripts/install_deps.sh          build + test dependencies
+#   scripts/install_deps.sh --viz    also RViz and Xvfb (screenshots, desktop use)
+set -euo pipefail
+
+PACKAGES=(
+  # toolchain and libraries of the core
+  build-essential cmake pkg-config git
+  libtorch-dev libopenblas0-pthread libeigen3-dev libnanoflann-dev
+  libgtest-dev libgmock-dev
+  # io
+  libopencv-dev
+  # ROS 1 (Debian's packaging): build system, message generation and definitions
+  catkin ros-cmake-modules ros-message-generation ros-message-runtime
+  python3-catkin-pkg python3-genmsg python3-gencpp python3-genpy python3-empy
+  ros-std-msgs libstd-msgs-dev ros-sensor-msgs libsensor-msgs-dev
+  ros-geometry-msgs libgeometry-msgs-dev ros-diagnostic-msgs libdiagnostic-msgs-dev
+  ros-std-srvs libstd-srvs-dev ros-tf2-msgs libtf2-msgs-dev ros-rosgraph-msgs
+  # ROS 1 libraries the nodes use
+  libroscpp-dev libnodeletlib-dev libnodelet-dev pluginlib-dev
+  libtf2-dev libtf2-ros-dev libtf2-eigen-dev
+  libcv-bridge-dev libimage-transport-dev libmessage-filters-dev
+  librosbag-dev librosbag-storage-dev
+  # ROS 1 runtime tools: master, roslaunch, rostest, rosbag play
+  ros-core python3-rostest librostest-dev rosbash
+)
+if [[ "${1:-}" == "--viz" ]]; then
+  PACKAGES+=(rviz xvfb)
+fi
+
+missing=()
+for p in "${PACKAGES[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if ((${#missing[@]} == 0)); then
+  echo "[install_deps] all ${#PACKAGES[@]} packages present"
+  exit 0
+fi
+
+SUDO=""
+if [[ $(id -u) -ne 0 ]]; then SUDO="sudo"; fi
+echo "[install_deps] installing ${#missing[@]} missing packages: ${missing[*]}"
+export DEBIAN_FRONTEND=noninteractive
+$SUDO apt-get update -q
+$SUDO apt-get install -y -q --no-install-recommends "${missing[@]}"
+echo "[install_deps] done"

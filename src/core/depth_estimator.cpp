@@ -1,0 +1,79 @@
+#include "unsup_mvs/core/depth_estimator.h"
+
+#include <torch/torch.h>
+
+#include <chrono>
+#include <stdexcept>
+
+#include "unsup_mvs/core/image_ops.h"
+
+namespace umvs {
+
+Camera depth_map_camera(const Camera& network_camera, double scale) {
+  Camera c = network_camera;
+  c.K.topRows<2>() *= scale;
+  c.width = static_cast<int>(network_camera.width * scale);
+  c.height = static_cast<int>(network_camera.height * scale);
+  return c;
+}
+
+DepthEstimator::DepthEstimator(MvsNet model, torch::Device device, DepthEstimatorConfig config)
+    : model_(std::move(model)), device_(device), config_(config) {
+  if (config_.num_depth != 0 && (config_.num_depth < 8 || config_.num_depth % 8 != 0)) {
+    throw std::invalid_argument("num_depth must be a positive multiple of 8, got " + std::to_string(config_.num_depth));
+  }
+  model_->to(device_);
+  model_->eval();
+}
+
+int DepthEstimator::num_depth() const {
+  return config_.num_depth > 0 ? config_.num_depth : model_->config().num_depth;
+}
+
+DepthMap DepthEstimator::estimate(const std::vector<ViewInput>& views, double depth_min, double depth_max) {
+  if (views.size() < 2) throw std::invalid_argument("need a reference and at least one source view");
+  const auto& ref = views.front();
+  std::vector<torch::Tensor> images;
+  std::vector<Camera> cameras;
+  const NetworkResize plan = plan_network_resize(ref.camera.width, ref.camera.height, config_.max_width, config_.max_height);
+  for (size_t i = 0; i < views.size(); ++i) {
+    const auto& v = views[i];
+    const std::string name = i == 0 ? "reference view" : "source view " + std::to_string(i);
+    v.camera.validate(name);
+    if (!v.image.defined() || v.image.dim() != 3 || v.image.size(2) != 3 || v.image.scalar_type() != torch::kUInt8) {
+      throw std::invalid_argument(name + ": image must be uint8 [H,W,3]");
+    }
+    if (v.image.size(0) != v.camera.height || v.image.size(1) != v.camera.width) {
+      throw std::invalid_argument(name + ": image is " + std::to_string(v.image.size(1)) + "x" + std::to_string(v.image.size(0)) +
+                                  " but its camera says " + std::to_string(v.camera.width) + "x" + std::to_string(v.camera.height));
+    }
+    if (v.camera.width != ref.camera.width || v.camera.height != ref.camera.height) {
+      throw std::invalid_argument(name + " has another image size than the reference");
+    }
+    images.push_back(apply_network_resize(rgb8_to_float(v.image), plan));
+    cameras.push_back(apply_network_resize(v.camera, plan));
+  }
+  const int D = num_depth();
+  auto depth_values = depth_hypotheses(depth_min, depth_max, D, model_->config().depth_sampling);
+
+  const auto t0 = std::chrono::steady_clock::now();
+  MvsOutput out;
+  {
+    torch::NoGradGuard no_grad;
+    auto batch = torch::stack(images).unsqueeze(0).to(device_);
+    auto proj = mvsnet_projection_matrices(cameras).unsqueeze(0).to(device_);
+    out = model_->forward(batch, proj, depth_values.unsqueeze(0).to(device_));
+  }
+  DepthMap map;
+  map.depth = out.depth.squeeze(0).to(torch::kCPU);
+  map.confidence = out.confidence.squeeze(0).to(torch::kCPU);
+  map.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  map.network_camera = cameras.front();
+  map.camera = depth_map_camera(cameras.front());
+  map.color = float_to_rgb8(images.front().slice(1, 0, plan.height, 4).slice(2, 0, plan.width, 4));
+  map.depth_min = depth_min;
+  map.depth_max = depth_max;
+  return map;
+}
+
+}  // namespace umvs

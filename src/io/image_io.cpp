@@ -1,0 +1,128 @@
+#include "unsup_mvs/io/image_io.h"
+
+#include <torch/torch.h>
+
+#include <stdexcept>
+
+#include "unsup_mvs/io/atomic_file.h"
+
+#if defined(UMVS_HAVE_OPENCV)
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#elif defined(UMVS_HAVE_STB)
+#define STB_IMAGE_IMPLEMENTATION
+#define STB_IMAGE_WRITE_IMPLEMENTATION
+#include <stb_image.h>
+#include <stb_image_write.h>
+#endif
+
+namespace umvs {
+
+namespace fail_msg {
+[[noreturn]] void unsupported(const std::string& path) {
+  throw std::runtime_error("cannot read image '" + path +
+                           "': this build has no image decoder (built without OpenCV and stb_image)");
+}
+}  // namespace fail_msg
+
+#if defined(UMVS_HAVE_OPENCV)
+
+torch::Tensor read_image_rgb8(const std::string& path) {
+  cv::Mat img = cv::imread(path, cv::IMREAD_UNCHANGED);
+  if (img.empty()) throw std::runtime_error("cannot read image '" + path + "' (missing or not an image)");
+  if (img.depth() == CV_16U) img.convertTo(img, CV_8U, 1.0 / 257.0);
+  if (img.depth() != CV_8U) throw std::runtime_error("image '" + path + "' has an unsupported pixel type");
+  cv::Mat rgb;
+  switch (img.channels()) {
+    case 1: cv::cvtColor(img, rgb, cv::COLOR_GRAY2RGB); break;
+    case 3: cv::cvtColor(img, rgb, cv::COLOR_BGR2RGB); break;
+    case 4: cv::cvtColor(img, rgb, cv::COLOR_BGRA2RGB); break;
+    default: throw std::runtime_error("image '" + path + "' has " + std::to_string(img.channels()) + " channels");
+  }
+  return torch::from_blob(rgb.data, {rgb.rows, rgb.cols, 3}, torch::kUInt8).clone();
+}
+
+torch::Tensor read_image_u16(const std::string& path) {
+  cv::Mat img = cv::imread(path, cv::IMREAD_ANYDEPTH);
+  if (img.empty()) throw std::runtime_error("cannot read image '" + path + "' (missing or not an image)");
+  if (img.channels() != 1) throw std::runtime_error("image '" + path + "' is not single-channel");
+  img.convertTo(img, CV_32S);
+  return torch::from_blob(img.data, {img.rows, img.cols}, torch::kInt32).clone();
+}
+
+namespace {
+void write_mat(const std::string& path, const cv::Mat& mat) {
+  std::vector<uchar> buf;
+  if (!cv::imencode(".png", mat, buf)) throw std::runtime_error("cannot encode PNG for '" + path + "'");
+  write_file_atomically(path, [&](std::ostream& out) {
+    out.write(reinterpret_cast<const char*>(buf.data()), static_cast<std::streamsize>(buf.size()));
+  });
+}
+}  // namespace
+
+void write_png(const std::string& path, const torch::Tensor& image_u8) {
+  auto t = image_u8.to(torch::kCPU, torch::kUInt8).contiguous();
+  if (t.dim() == 2) {
+    write_mat(path, cv::Mat(t.size(0), t.size(1), CV_8UC1, t.data_ptr()));
+  } else if (t.dim() == 3 && t.size(2) == 3) {
+    cv::Mat bgr;
+    cv::cvtColor(cv::Mat(t.size(0), t.size(1), CV_8UC3, t.data_ptr()), bgr, cv::COLOR_RGB2BGR);
+    write_mat(path, bgr);
+  } else {
+    throw std::invalid_argument("write_png: expected [H,W] or [H,W,3] uint8");
+  }
+}
+
+void write_png_u16(const std::string& path, const torch::Tensor& values) {
+  auto t = values.to(torch::kCPU, torch::kInt32).clamp(0, 65535).contiguous();
+  cv::Mat m(t.size(0), t.size(1), CV_32SC1, t.data_ptr());
+  cv::Mat m16;
+  m.convertTo(m16, CV_16U);
+  write_mat(path, m16);
+}
+
+#elif defined(UMVS_HAVE_STB)
+
+torch::Tensor read_image_rgb8(const std::string& path) {
+  int w, h, c;
+  unsigned char* data = stbi_load(path.c_str(), &w, &h, &c, 3);
+  if (!data) throw std::runtime_error("cannot read image '" + path + "': " + stbi_failure_reason());
+  auto out = torch::from_blob(data, {h, w, 3}, torch::kUInt8).clone();
+  stbi_image_free(data);
+  return out;
+}
+
+torch::Tensor read_image_u16(const std::string& path) {
+  int w, h, c;
+  unsigned short* data = stbi_load_16(path.c_str(), &w, &h, &c, 1);
+  if (!data) throw std::runtime_error("cannot read image '" + path + "': " + stbi_failure_reason());
+  auto out = torch::from_blob(data, {h, w}, torch::kInt16).clone().to(torch::kInt32).bitwise_and(0xffff);
+  stbi_image_free(data);
+  return out;
+}
+
+void write_png(const std::string& path, const torch::Tensor& image_u8) {
+  auto t = image_u8.to(torch::kCPU, torch::kUInt8).contiguous();
+  const int channels = t.dim() == 2 ? 1 : static_cast<int>(t.size(2));
+  int len = 0;
+  unsigned char* png = stbi_write_png_to_mem(t.data_ptr<uint8_t>(), static_cast<int>(t.size(1)) * channels,
+                                             static_cast<int>(t.size(1)), static_cast<int>(t.size(0)), channels, &len);
+  if (!png) throw std::runtime_error("cannot encode PNG for '" + path + "'");
+  write_file_atomically(path, [&](std::ostream& out) { out.write(reinterpret_cast<const char*>(png), len); });
+  STBIW_FREE(png);
+}
+
+void write_png_u16(const std::string& path, const torch::Tensor&) {
+  throw std::runtime_error("writing 16-bit PNG '" + path + "' needs OpenCV");
+}
+
+#else
+
+torch::Tensor read_image_rgb8(const std::string& path) { fail_msg::unsupported(path); }
+torch::Tensor read_image_u16(const std::string& path) { fail_msg::unsupported(path); }
+void write_png(const std::string& path, const torch::Tensor&) { fail_msg::unsupported(path); }
+void write_png_u16(const std::string& path, const torch::Tensor&) { fail_msg::unsupported(path); }
+
+#endif
+
+}  // namespace umvs

@@ -1,0 +1,128 @@
+// umvs bench: speed and memory of the network (and later fusion) on synthetic input.
+#include <torch/torch.h>
+
+#include <algorithm>
+#include <chrono>
+#include <fstream>
+#include <iomanip>
+#include <iostream>
+#include <sstream>
+
+#include "unsup_mvs/core/device.h"
+#include "unsup_mvs/core/geometry.h"
+#include "unsup_mvs/core/mvsnet.h"
+#include "unsup_mvs/io/checkpoint.h"
+#include "unsup_mvs/tools/args.h"
+#include "unsup_mvs/tools/bench_util.h"
+#include "unsup_mvs/tools/command.h"
+
+namespace umvs {
+
+double peak_rss_mib() {
+  std::ifstream status("/proc/self/status");
+  for (std::string line; std::getline(status, line);) {
+    if (line.rfind("VmHWM:", 0) == 0) return std::stod(line.substr(6)) / 1024.0;
+  }
+  return 0.0;
+}
+
+BenchStats summarize(std::vector<double> seconds) {
+  std::sort(seconds.begin(), seconds.end());
+  BenchStats s;
+  s.runs = static_cast<int>(seconds.size());
+  s.min = seconds.front();
+  s.max = seconds.back();
+  const size_t n = seconds.size();
+  s.median = n % 2 ? seconds[n / 2] : 0.5 * (seconds[n / 2 - 1] + seconds[n / 2]);
+  return s;
+}
+
+namespace {
+
+// Cameras on a short horizontal baseline looking at a fronto-parallel scene.
+std::vector<Camera> bench_cameras(int width, int height, int views) {
+  std::vector<Camera> cams;
+  for (int v = 0; v < views; ++v) {
+    Camera c;
+    c.width = width;
+    c.height = height;
+    c.K << 0.8 * width, 0, width / 2.0 - 0.5, 0, 0.8 * width, height / 2.0 - 0.5, 0, 0, 1;
+    c.T_cam_world(0, 3) = -0.05 * v;
+    cams.push_back(c);
+  }
+  return cams;
+}
+
+}  // namespace
+}  // namespace umvs
+
+UMVS_COMMAND(bench, "time and memory of the network on synthetic input") {
+  umvs::Args args("bench",
+                  "Times forward passes of MVSNet on random images (random weights unless --checkpoint):\n"
+                  "median/min/max seconds per depth map over --runs runs after --warmup runs, achieved\n"
+                  "GFLOP/s (convolutions) and peak memory (process RSS on CPU, allocator peak on CUDA).");
+  args.option("case", "network", "what to time: network")
+      .option("width", "640", "image width (multiple of 32)")
+      .option("height", "512", "image height (multiple of 32)")
+      .option("num-depth", "128", "depth hypotheses")
+      .option("views", "3", "views per depth map")
+      .option("threads", "2", "CPU threads")
+      .option("device", "cpu", "cpu | cuda")
+      .option("runs", "5", "timed runs (>= 5 recommended)")
+      .option("warmup", "1", "untimed runs first")
+      .option("checkpoint", "", "time these weights (default random init)")
+      .flag("refine", "include the refinement network")
+      .flag("json", "print one JSON object instead of text");
+  if (!args.parse(argc, argv)) return 0;
+  umvs::configure_threads(args.integer("threads"));
+  const auto device = umvs::parse_device(args.str("device"));
+  const int W = args.integer("width"), H = args.integer("height"), D = args.integer("num-depth"), V = args.integer("views");
+  const int runs = args.integer("runs");
+  if (runs < 1) throw std::invalid_argument("--runs must be >= 1");
+  if (args.str("case") != "network") throw std::invalid_argument("unknown --case '" + args.str("case") + "'");
+
+  umvs::MvsNetConfig cfg;
+  cfg.num_depth = D;
+  cfg.num_views = V;
+  cfg.refine = args.on("refine");
+  umvs::MvsNet model = args.str("checkpoint").empty() ? umvs::MvsNet(cfg) : umvs::load_model(args.str("checkpoint"), device, &cfg).model;
+  model->to(device);
+  model->eval();
+  torch::manual_seed(0);
+  auto images = torch::rand({1, V, 3, H, W}).to(device);
+  auto proj = umvs::mvsnet_projection_matrices(umvs::bench_cameras(W, H, V)).unsqueeze(0).to(device);
+  auto depth_values = umvs::depth_hypotheses(1.0, 10.0, D, umvs::DepthSampling::kUniformInverseDepth).unsqueeze(0).to(device);
+
+  auto run_once = [&]() {
+    torch::NoGradGuard no_grad;
+    auto out = model->forward(images, proj, depth_values);
+    if (device.is_cuda()) torch::cuda::synchronize();
+    return out.depth.sum().item<double>();
+  };
+  for (int i = 0; i < args.integer("warmup"); ++i) run_once();
+  std::vector<double> seconds;
+  for (int i = 0; i < runs; ++i) {
+    const auto t0 = std::chrono::steady_clock::now();
+    run_once();
+    seconds.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+  }
+  const auto s = umvs::summarize(seconds);
+  const double gflop = umvs::mvsnet_forward_flops(H, W, D, V, cfg.refine) / 1e9;
+  const double memory_mib = umvs::peak_rss_mib();
+  std::ostringstream device_name;
+  device_name << device;
+  if (args.on("json")) {
+    std::cout << std::setprecision(6) << "{\"case\": \"network\", \"width\": " << W << ", \"height\": " << H
+              << ", \"num_depth\": " << D << ", \"views\": " << V << ", \"threads\": " << torch::get_num_threads()
+              << ", \"device\": \"" << device_name.str() << "\", \"runs\": " << s.runs << ", \"median_s\": " << s.median
+              << ", \"min_s\": " << s.min << ", \"max_s\": " << s.max << ", \"gflop\": " << gflop
+              << ", \"gflops\": " << gflop / s.median << ", \"peak_rss_mib\": " << memory_mib << "}\n";
+  } else {
+    std::cout << std::fixed << std::setprecision(3) << "network " << W << "x" << H << " D=" << D << " V=" << V
+              << " device=" << device_name.str() << " threads=" << torch::get_num_threads() << ": median " << s.median
+              << " s (min " << s.min << ", max " << s.max << ", " << s.runs << " runs), " << std::setprecision(1)
+              << gflop << " GFLOP -> " << gflop / s.median << " GFLOP/s, peak RSS " << std::setprecision(0)
+              << memory_mib << " MiB\n";
+  }
+  return 0;
+}

@@ -1,0 +1,123 @@
+// umvs infer: depth and confidence maps for the views of an MVSNet-format folder.
+#include <torch/torch.h>
+
+#include <filesystem>
+#include <iostream>
+#include <map>
+
+#include "unsup_mvs/core/depth_estimator.h"
+#include "unsup_mvs/core/device.h"
+#include "unsup_mvs/core/image_ops.h"
+#include "unsup_mvs/io/array_io.h"
+#include "unsup_mvs/io/atomic_file.h"
+#include "unsup_mvs/io/checkpoint.h"
+#include "unsup_mvs/io/image_io.h"
+#include "unsup_mvs/io/mvs_folder.h"
+#include "unsup_mvs/tools/args.h"
+#include "unsup_mvs/tools/command.h"
+#include "unsup_mvs/tools/progress.h"
+
+namespace fs = std::filesystem;
+
+UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
+  umvs::Args args("infer",
+                  "Runs MVSNet on every reference view of DIR (or those given by --ref) with its best\n"
+                  "neighbours from pair.txt. Writes, per view XXXXXXXX:\n"
+                  "  OUT/depth_est/XXXXXXXX.pfm (+ .png preview)   depth in scene units, 1/4 of the network input\n"
+                  "  OUT/confidence/XXXXXXXX.pfm (+ .png)         photometric confidence in [0,1]\n"
+                  "  OUT/cams/XXXXXXXX_cam.txt, OUT/images/XXXXXXXX.png  camera and colours of the depth map\n"
+                  "and OUT/pair.txt, so OUT is itself a folder `umvs fuse` and `umvs eval` read.");
+  args.required("data", "MVSNet-format input folder (images/, cams/, pair.txt)")
+      .required("checkpoint", "model: our checkpoint or MVSNet_pytorch weights")
+      .required("out", "output folder")
+      .option("views", "3", "views per depth map (reference + neighbours)")
+      .option("num-depth", "0", "depth hypotheses (multiple of 8; 0 = the checkpoint's)")
+      .option("depth-sampling", "", "depth|inverse_depth (default: the checkpoint's)")
+      .option("max-width", "0", "scale images down to at most this width (0 = keep)")
+      .option("max-height", "0", "scale images down to at most this height (0 = keep)")
+      .option("depth-min", "0", "override the near end of the depth range (0 = from the cam file)")
+      .option("depth-max", "0", "override the far end of the depth range (0 = from the cam file)")
+      .option("ref", "", "comma-separated reference view ids (default: all in pair.txt)")
+      .option("device", "cpu", "cpu | cuda | cuda:N")
+      .option("threads", "0", "CPU threads (0 = all cores)");
+  if (!args.parse(argc, argv)) return 0;
+
+  umvs::configure_threads(args.integer("threads"));
+  const auto device = umvs::parse_device(args.str("device"));
+  const int views = args.integer("views");
+  if (views < 2) throw std::invalid_argument("--views must be at least 2");
+  umvs::MvsFolder folder(args.str("data"));
+
+  auto loaded = umvs::load_model(args.str("checkpoint"), device);
+  if (args.given("depth-sampling")) loaded.model->set_depth_sampling(umvs::depth_sampling_from_string(args.str("depth-sampling")));
+  umvs::DepthEstimatorConfig cfg;
+  cfg.max_width = args.integer("max-width");
+  cfg.max_height = args.integer("max-height");
+  cfg.num_depth = args.integer("num-depth");
+  umvs::DepthEstimator estimator(loaded.model, device, cfg);
+  std::cerr << "model: " << args.str("checkpoint") << " (" << loaded.format << ", " << loaded.model->config().to_string()
+            << "), " << estimator.num_depth() << " depth planes, device " << device << ", "
+            << torch::get_num_threads() << " threads\n";
+
+  std::vector<int> refs = args.integers("ref");
+  if (refs.empty()) {
+    for (const auto& p : folder.pairs()) refs.push_back(p.ref);
+  }
+  const std::string out = args.str("out");
+  for (const char* sub : {"depth_est", "confidence", "cams", "images"}) umvs::make_directories(out + "/" + sub);
+
+  std::map<int, umvs::MvsView> cache;
+  auto view = [&](int id) -> const umvs::MvsView& {
+    auto it = cache.find(id);
+    if (it == cache.end()) it = cache.emplace(id, folder.load_view(id)).first;
+    return it->second;
+  };
+
+  std::vector<umvs::ViewPair> out_pairs;
+  umvs::Progress progress("infer", static_cast<int64_t>(refs.size()));
+  int done = 0, skipped = 0;
+  double total_seconds = 0;
+  for (int ref : refs) {
+    const auto& pair = folder.pair_of(ref);
+    if (static_cast<int>(pair.sources.size()) < views - 1) {
+      std::cerr << "\nview " << ref << ": only " << pair.sources.size() << " neighbours in pair.txt, need "
+                << views - 1 << "; skipped\n";
+      ++skipped;
+      continue;
+    }
+    std::vector<umvs::ViewInput> inputs;
+    inputs.push_back({view(ref).image, view(ref).cam.camera});
+    for (int i = 0; i < views - 1; ++i) inputs.push_back({view(pair.sources[i]).image, view(pair.sources[i]).cam.camera});
+    const auto& cam = view(ref).cam;
+    const double dmin = args.real("depth-min") > 0 ? args.real("depth-min") : cam.depth_min;
+    const double dmax = args.real("depth-max") > 0 ? args.real("depth-max") : cam.resolved_depth_max(estimator.num_depth());
+    if (dmin <= 0) throw std::invalid_argument("view " + std::to_string(ref) + ": no depth range in its cam file; give --depth-min/--depth-max");
+
+    const umvs::DepthMap map = estimator.estimate(inputs, dmin, dmax);
+    total_seconds += map.seconds;
+    const std::string stem = umvs::view_file_stem(ref);
+    umvs::write_pfm(out + "/depth_est/" + stem + ".pfm", map.depth);
+    umvs::write_pfm(out + "/confidence/" + stem + ".pfm", map.confidence);
+    umvs::write_png(out + "/depth_est/" + stem + ".png", umvs::colorize(map.depth, dmin, dmax, map.confidence > 0.5));
+    umvs::write_png(out + "/confidence/" + stem + ".png", map.confidence.mul(255).round().clamp(0, 255).to(torch::kUInt8));
+    umvs::write_png(out + "/images/" + stem + ".png", map.color);
+    umvs::MvsCam out_cam;
+    out_cam.camera = map.camera;
+    out_cam.depth_min = dmin;
+    out_cam.depth_interval = (dmax - dmin) / (estimator.num_depth() - 1);
+    out_cam.depth_num = estimator.num_depth();
+    out_cam.depth_max = dmax;
+    umvs::write_cam_file(out + "/cams/" + stem + "_cam.txt", out_cam);
+    out_pairs.push_back(pair);
+    ++done;
+    char extra[96];
+    std::snprintf(extra, sizeof(extra), "view %d: %.2f s, conf>0.8 %.1f%%", ref, map.seconds,
+                  100.0 * (map.confidence > 0.8).to(torch::kFloat32).mean().item<double>());
+    progress.update(done + skipped, extra);
+  }
+  progress.finish();
+  umvs::write_pair_file(out + "/pair.txt", out_pairs);
+  std::cout << "wrote " << done << " depth maps to " << out << " (" << skipped << " skipped), "
+            << (done ? total_seconds / done : 0.0) << " s per depth map\n";
+  return done > 0 ? 0 : 1;
+}

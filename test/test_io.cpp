@@ -1,0 +1,206 @@
+#include <gtest/gtest.h>
+#include <torch/torch.h>
+
+#include <fstream>
+
+#include "test_util.h"
+#include "unsup_mvs/io/array_io.h"
+#include "unsup_mvs/io/checkpoint.h"
+#include "unsup_mvs/io/image_io.h"
+#include "unsup_mvs/io/mvs_folder.h"
+#include "unsup_mvs/io/ply.h"
+
+namespace umvs {
+namespace {
+
+void write_text(const std::string& path, const std::string& text) { std::ofstream(path) << text; }
+
+TEST(ArrayIo, NpyRoundTrip) {
+  const auto dir = test::temp_dir("npy");
+  auto a = torch::rand({3, 4, 5});
+  write_npy(dir + "/a.npy", a);
+  EXPECT_TRUE(torch::equal(read_npy(dir + "/a.npy"), a));
+  auto b = torch::randint(0, 255, {7, 2}).to(torch::kUInt8);
+  write_npy(dir + "/b.npy", b);
+  EXPECT_TRUE(torch::equal(read_npy(dir + "/b.npy"), b));
+  auto s = torch::arange(6, torch::kInt64);
+  write_npy(dir + "/s.npy", s);
+  EXPECT_TRUE(torch::equal(read_npy(dir + "/s.npy"), s));
+  write_text(dir + "/bad.npy", "hello");
+  EXPECT_THROW(read_npy(dir + "/bad.npy"), std::runtime_error);
+}
+
+TEST(ArrayIo, PfmRoundTripKeepsRowOrder) {
+  const auto dir = test::temp_dir("pfm");
+  auto a = torch::arange(12, torch::kFloat32).view({3, 4});
+  write_pfm(dir + "/a.pfm", a);
+  auto r = read_pfm(dir + "/a.pfm");
+  EXPECT_TRUE(torch::equal(r, a));
+  // The first stored row is the bottom image row.
+  std::ifstream in(dir + "/a.pfm", std::ios::binary);
+  std::string line;
+  for (int i = 0; i < 3; ++i) std::getline(in, line);
+  float first;
+  in.read(reinterpret_cast<char*>(&first), 4);
+  EXPECT_EQ(first, 8.0f);
+  write_text(dir + "/short.pfm", "Pf\n4 3\n-1\nabc");
+  EXPECT_THROW(read_pfm(dir + "/short.pfm"), std::runtime_error);
+}
+
+TEST(Ply, BinaryRoundTripWithAttributes) {
+  const auto dir = test::temp_dir("ply");
+  PointCloud c;
+  for (int i = 0; i < 5; ++i) {
+    c.points.emplace_back(i, 2.0f * i, -0.5f * i);
+    c.colors.push_back({static_cast<uint8_t>(i), 10, 200});
+    c.confidence.push_back(0.1f * i);
+    c.num_views.push_back(static_cast<uint8_t>(i + 2));
+  }
+  write_ply(dir + "/c.ply", c);
+  const PointCloud r = read_ply(dir + "/c.ply");
+  ASSERT_EQ(r.size(), 5u);
+  EXPECT_EQ(r.points[3], c.points[3]);
+  EXPECT_EQ(r.colors[4], c.colors[4]);
+  EXPECT_FLOAT_EQ(r.confidence[2], 0.2f);
+  EXPECT_EQ(r.num_views[1], 3);
+  write_text(dir + "/a.ply", "ply\nformat ascii 1.0\nelement vertex 2\nproperty double x\nproperty double y\n"
+                             "property double z\nproperty int flags\nend_header\n1 2 3 0\n4 5 6 1\n");
+  const PointCloud a = read_ply(dir + "/a.ply");
+  ASSERT_EQ(a.size(), 2u);
+  EXPECT_FLOAT_EQ(a.points[1].z(), 6.0f);
+  EXPECT_FALSE(a.has_colors());
+}
+
+TEST(AtomicWrite, FailedWriteKeepsTheOldFile) {
+  const auto dir = test::temp_dir("atomic");
+  PointCloud c;
+  c.points.emplace_back(1, 2, 3);
+  write_ply(dir + "/keep.ply", c);
+  PointCloud bad;
+  bad.points.emplace_back(0, 0, 0);
+  // An unwritable target folder (a file in the way) fails without touching keep.ply.
+  write_text(dir + "/blocker", "x");
+  EXPECT_THROW(write_ply(dir + "/blocker/out.ply", bad), std::runtime_error);
+  EXPECT_EQ(read_ply(dir + "/keep.ply").points[0], c.points[0]);
+}
+
+TEST(MvsFolder, CamFileRoundTripAndErrors) {
+  const auto dir = test::temp_dir("cam");
+  MvsCam cam;
+  cam.camera.K << 361.5, 0, 160.25, 0, 362.0, 128.5, 0, 0, 1;
+  cam.camera.T_cam_world.topLeftCorner<3, 3>() = Eigen::AngleAxisd(0.4, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
+  cam.camera.T_cam_world.topRightCorner<3, 1>() = Eigen::Vector3d(0.1, 0.2, 0.3);
+  cam.depth_min = 425;
+  cam.depth_interval = 2.5;
+  cam.depth_num = 192;
+  write_cam_file(dir + "/ok_cam.txt", cam);
+  const MvsCam r = read_cam_file(dir + "/ok_cam.txt");
+  EXPECT_TRUE(r.camera.K.isApprox(cam.camera.K, 1e-12));
+  EXPECT_TRUE(r.camera.T_cam_world.isApprox(cam.camera.T_cam_world, 1e-10));
+  EXPECT_DOUBLE_EQ(r.resolved_depth_max(128), 425 + 2.5 * 191);
+
+  auto expect_error = [&](const std::string& text, const std::string& needle) {
+    write_text(dir + "/bad_cam.txt", text);
+    try {
+      read_cam_file(dir + "/bad_cam.txt");
+      ADD_FAILURE() << "accepted: " << text;
+    } catch (const std::runtime_error& e) {
+      EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("bad_cam.txt"), std::string::npos) << e.what();
+    }
+  };
+  const std::string ext = "extrinsic\n1 0 0 0\n0 1 0 0\n0 0 1 0\n0 0 0 1\n";
+  const std::string intr = "intrinsic\n100 0 50\n0 100 40\n0 0 1\n";
+  expect_error("intrinsic\n", "expected 'extrinsic'");
+  expect_error(ext + "intrinsic\n100 0 50\n0 abc 40\n0 0 1\n", "not a number");
+  expect_error(ext + "intrinsic\n100 0 50\n0 nan 40\n0 0 1\n", "non-finite");
+  expect_error(ext + intr + "2.0 0.01 128 1.0\n", "impossible depth range");
+  expect_error("extrinsic\n2 0 0 0\n0 1 0 0\n0 0 1 0\n0 0 0 1\n" + intr + "1 0.1\n", "rotation");
+  expect_error(ext + "intrinsic\n100 0 50\n0 100 40\n", "file ends");
+}
+
+TEST(MvsFolder, PairFileRoundTripAndMissingParts) {
+  const auto dir = test::temp_dir("pair");
+  std::vector<ViewPair> pairs = {{0, {1, 2}, {3.5, 1.25}}, {1, {0}, {3.5}}};
+  write_pair_file(dir + "/pair.txt", pairs);
+  const auto r = read_pair_file(dir + "/pair.txt");
+  ASSERT_EQ(r.size(), 2u);
+  EXPECT_EQ(r[0].sources, (std::vector<int>{1, 2}));
+  EXPECT_DOUBLE_EQ(r[0].scores[1], 1.25);
+  try {
+    MvsFolder folder(dir);
+    FAIL();
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("images/"), std::string::npos);
+  }
+}
+
+TEST(Checkpoint, RoundTripAndMismatchIsNamed) {
+  const auto dir = test::temp_dir("ckpt");
+  MvsNetConfig cfg;
+  cfg.num_depth = 32;
+  cfg.depth_sampling = DepthSampling::kUniformInverseDepth;
+  torch::manual_seed(3);
+  MvsNet net(cfg);
+  CheckpointMeta meta;
+  meta.step = 42;
+  meta.metrics["val_loss"] = 0.25;
+  meta.optimizer_state = std::string("\x00\x01\xff", 3);
+  save_checkpoint(dir + "/a.pt", net, meta);
+  auto loaded = load_model(dir + "/a.pt", torch::kCPU);
+  EXPECT_EQ(loaded.format, "unsup_mvs");
+  EXPECT_EQ(loaded.model->config().num_depth, 32);
+  EXPECT_EQ(loaded.model->config().depth_sampling, DepthSampling::kUniformInverseDepth);
+  EXPECT_EQ(loaded.meta.step, 42);
+  EXPECT_EQ(loaded.meta.optimizer_state, meta.optimizer_state);
+  EXPECT_DOUBLE_EQ(loaded.meta.metrics.at("val_loss"), 0.25);
+  auto p1 = net->named_parameters()["cost_regularization.conv3.conv.weight"];
+  auto p2 = loaded.model->named_parameters()["cost_regularization.conv3.conv.weight"];
+  EXPECT_TRUE(torch::equal(p1, p2));
+
+  MvsNetConfig want_refine = cfg;
+  want_refine.refine = true;
+  try {
+    load_model(dir + "/a.pt", torch::kCPU, &want_refine);
+    FAIL();
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("refinement"), std::string::npos) << e.what();
+  }
+  write_text(dir + "/corrupt.pt", "this is not a checkpoint");
+  try {
+    load_model(dir + "/corrupt.pt", torch::kCPU);
+    FAIL();
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("corrupt.pt"), std::string::npos) << e.what();
+  }
+}
+
+TEST(Checkpoint, StateDictErrorsNameTheTensors) {
+  MvsNet net(MvsNetConfig{});
+  c10::impl::GenericDict d(c10::StringType::get(), c10::AnyType::get());
+  for (const auto& p : net->named_parameters()) d.insert(p.key(), p.value().detach().clone());
+  for (const auto& b : net->named_buffers()) d.insert(b.key(), b.value().detach().clone());
+  d.erase("feature.conv0.bn.weight");
+  d.insert_or_assign("feature.feature.bias", torch::zeros({31}));
+  d.insert("extra.weight", torch::zeros({1}));
+  try {
+    load_state_dict(*net, d, "weights.pt");
+    FAIL();
+  } catch (const std::runtime_error& e) {
+    const std::string msg = e.what();
+    EXPECT_NE(msg.find("missing tensor 'feature.conv0.bn.weight'"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("'feature.feature.bias' has shape [31]"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("unexpected tensor 'extra.weight'"), std::string::npos) << msg;
+  }
+}
+
+TEST(ImageIo, PngRoundTrip) {
+  const auto dir = test::temp_dir("png");
+  auto img = torch::randint(0, 256, {5, 7, 3}).to(torch::kUInt8);
+  write_png(dir + "/a.png", img);
+  EXPECT_TRUE(torch::equal(read_image_rgb8(dir + "/a.png"), img));
+  EXPECT_THROW(read_image_rgb8(dir + "/missing.png"), std::runtime_error);
+}
+
+}  // namespace
+}  // namespace umvs

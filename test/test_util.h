@@ -1,0 +1,44 @@
+// Helpers shared by the gtest files.
+#pragma once
+
+#include <gtest/gtest.h>
+#include <torch/types.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <string>
+
+namespace umvs::test {
+
+// ../shared/data beside the repository (or $UMVS_SHARED_DATA); "" when absent.
+inline std::string shared_data_dir() {
+  if (const char* env = std::getenv("UMVS_SHARED_DATA")) return env;
+  const auto p = std::filesystem::path(UMVS_SOURCE_DIR).parent_path() / "shared" / "data";
+  return std::filesystem::is_directory(p) ? std::filesystem::canonical(p).string() : "";
+}
+
+// A fresh, empty temporary folder for one test.
+inline std::string temp_dir(const std::string& name) {
+  const auto p = std::filesystem::temp_directory_path() / ("umvs_test_" + name + "_" + std::to_string(::getpid()));
+  std::filesystem::remove_all(p);
+  std::filesystem::create_directories(p);
+  return p.string();
+}
+
+inline std::string umvs_binary() { return std::string(UMVS_BIN_DIR) + "/umvs"; }
+
+// Fraction of elements where |a - b| <= atol + rtol * |b|.
+inline double fraction_close(const torch::Tensor& a, const torch::Tensor& b, double rtol, double atol) {
+  return ((a - b).abs() <= atol + rtol * b.abs()).to(torch::kFloat64).mean().template item<double>();
+}
+
+}  // namespace umvs::test
+
+// Skips the test with a clear message when ../shared/data/<sub> is missing (a user's clone).
+#define UMVS_REQUIRE_SHARED(sub, var)                                                        \
+  const std::string var = ::umvs::test::shared_data_dir().empty()                            \
+                              ? std::string()                                                \
+                              : ::umvs::test::shared_data_dir() + "/" + (sub);               \
+  if (var.empty() || !std::filesystem::exists(var))                                          \
+    GTEST_SKIP() << "../shared/data/" << (sub) << " not found: real-data test skipped "       \
+                 << "(set UMVS_SHARED_DATA or clone next to shared/)"
