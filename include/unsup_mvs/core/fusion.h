@@ -1,0 +1,144 @@
+// Depth-map fusion: many per-view depth maps become one consistent, coloured point cloud.
+//
+// A reference pixel with depth d is kept when enough other views agree with it (geometric
+// consistency, as in MVSNet's and Fusibile's filters):
+//   1. lift the pixel with d into 3D and project it into a source view: pixel (u_s, v_s);
+//   2. read the source depth there (bilinear; every contributing source pixel must be a valid
+//      estimate), lift that source pixel into 3D and project it back into the reference:
+//      pixel (u', v') with depth d';
+//   3. the source agrees when |(u', v') - (u, v)| < max_reprojection_px and
+//      |d' - d| / d < max_relative_depth.
+// A pixel is a valid estimate when its depth is finite and > 0 and its confidence is
+// >= min_confidence (in both the reference and the sources). A pixel with at least
+// min_agreeing_views agreeing sources becomes a point at the mean of d and the agreeing d',
+// coloured by the reference, carrying the reference confidence and the number of agreeing
+// sources (PointCloud::num_views).
+//
+// Everything is batched tensor code (one reference against one source at a time over all its
+// pixels) and runs on the device given to the constructor; the resulting cloud is on the CPU.
+#pragma once
+
+#include <torch/types.h>
+
+#include <cstdint>
+#include <deque>
+#include <memory>
+#include <unordered_set>
+#include <vector>
+
+#include "unsup_mvs/core/camera.h"
+#include "unsup_mvs/core/point_cloud.h"
+
+namespace umvs {
+
+struct FusionConfig {
+  double min_confidence = 0.8;      // pixels below this confidence are no estimate (0 = keep all)
+  double max_reprojection_px = 1.0; // reference-pixel distance after the round trip, pixels
+  double max_relative_depth = 0.01; // |d' - d| / d
+  int min_agreeing_views = 3;       // sources (other than the reference) that must agree
+  int max_source_views = 10;        // batch: sources tested per reference, best first
+  double voxel_size = 0.0;          // > 0: at most one point per voxel of this edge (metres),
+                                    // the first one fused wins; 0 = off (one point per pixel)
+
+  // Throws std::invalid_argument naming the offending field.
+  void validate() const;
+};
+
+// One depth estimate (a network output or a ground-truth depth map).
+struct FusionView {
+  int64_t id = 0;
+  torch::Tensor depth;       // [H,W] float32, metres (z in the camera); <= 0 or non-finite = no estimate
+  torch::Tensor confidence;  // [H,W] float32 in [0,1]; undefined = 1 everywhere (ground truth)
+  torch::Tensor color;       // [H,W,3] uint8 RGB at the depth pixels; undefined = grey
+  Camera camera;             // camera of the depth map (width/height = W,H)
+};
+
+// Per reference view figures of a batch fusion (for progress output and benchmarks).
+struct FusionViewStats {
+  int64_t id = 0;
+  int num_sources = 0;       // sources tested
+  int64_t valid_pixels = 0;  // pixels that are an estimate (depth and confidence)
+  int64_t points = 0;        // points this view added to the cloud
+  double seconds = 0.0;
+};
+
+// Batch fusion: every view is a reference once, tested against its sources.
+class DepthFusion {
+ public:
+  DepthFusion(FusionConfig config, torch::Device device);
+
+  // sources[i]: indices into `views` of the sources of view i, best first (e.g. from pair.txt);
+  // at most config.max_source_views are used. Empty (or an empty entry) = ranked by MVSNet's
+  // view-selection score on points of view i's own depth map. `stats` (optional) receives one
+  // entry per view. Throws std::invalid_argument naming the view for inconsistent shapes,
+  // cameras or source indices.
+  PointCloud fuse(const std::vector<FusionView>& views, const std::vector<std::vector<int>>& sources = {},
+                  std::vector<FusionViewStats>* stats = nullptr);
+
+  const FusionConfig& config() const { return config_; }
+
+ private:
+  FusionConfig config_;
+  torch::Device device_;
+};
+
+// Online fusion for a stream of depth estimates. Keeps a ring of the last `window` estimates.
+// When a view is added it is tested against every stored estimate AND every stored estimate is
+// tested against it, so a pixel is emitted as soon as it has min_agreeing_views agreeing views
+// among the estimates it has met, whether it belongs to the new view or to an older one still in
+// the ring. Each pixel is emitted at most once. With a window holding all views, voxel_size = 0
+// and max_source_views >= views - 1, the emitted pixels are exactly those DepthFusion::fuse keeps
+// when every view's sources are all the others (positions may differ slightly: a point averages
+// the agreeing depths known when it is emitted). max_source_views is not used here: the window
+// bounds the work instead (each estimate meets at most 2 * window others).
+// Memory is bounded: `window` estimates on the device and at most `max_points` points (the
+// oldest are dropped first); with voxel_size > 0 a voxel hash keeps overlapping views from
+// piling up duplicates.
+class StreamingFusion {
+ public:
+  StreamingFusion(FusionConfig config, int window, size_t max_points, torch::Device device);
+  ~StreamingFusion();
+
+  // The points this estimate creates: its own pixels now confirmed and the pixels of stored
+  // estimates that it confirms (already appended to cloud()). Throws std::invalid_argument
+  // naming the view for bad shapes or cameras; the state is unchanged then.
+  PointCloud add(const FusionView& view);
+  const PointCloud& cloud() const { return cloud_; }  // everything so far (bounded)
+  void reset();                                       // forget the estimates and the cloud
+  size_t num_views() const;                           // estimates currently in the ring
+  int window() const { return window_; }
+  const FusionConfig& config() const { return config_; }
+
+ private:
+  struct Entry;
+  void append_points(PointCloud& points);
+  FusionConfig config_;
+  int window_;
+  size_t max_points_;
+  torch::Device device_;
+  std::deque<std::unique_ptr<Entry>> ring_;
+  PointCloud cloud_;
+  std::unordered_set<int64_t> voxels_;
+};
+
+// --- building blocks (exposed for tests and benchmarks) ------------------------------------
+
+// Valid-estimate mask of a view: finite depth > 0 and confidence >= min_confidence.  -> [H,W] bool
+torch::Tensor valid_estimate_mask(const torch::Tensor& depth, const torch::Tensor& confidence,
+                                  double min_confidence);
+
+// Geometric consistency of a reference depth map with one source.
+//   ref_depth [H,W] (invalid pixels may hold anything), ref_valid [H,W] bool,
+//   src_depth [Hs,Ws], src_valid [Hs,Ws] bool, all on one device.
+//   -> agree [H,W] bool, depth [H,W] float32: the source's depth seen from the reference (d'),
+//      meaningful where agree is true.
+struct ConsistencyCheck {
+  torch::Tensor agree;
+  torch::Tensor depth;
+};
+ConsistencyCheck check_consistency(const torch::Tensor& ref_depth, const torch::Tensor& ref_valid,
+                                   const Camera& ref_camera, const torch::Tensor& src_depth,
+                                   const torch::Tensor& src_valid, const Camera& src_camera,
+                                   const FusionConfig& config);
+
+}  // namespace umvs
