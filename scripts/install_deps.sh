@@ -10,6 +10,7 @@ PACKAGES=(
   build-essential cmake pkg-config git
   libtorch-dev libopenblas0-pthread libeigen3-dev libnanoflann-dev
   libgtest-dev libgmock-dev
+  libstb-dev  # image codecs for the portable build without OpenCV
   # io
   libopencv-dev
   # ROS 1 (Debian's packaging): build system, message generation and definitions
