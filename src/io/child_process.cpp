@@ -46,6 +46,7 @@ void ChildProcess::start(const std::vector<std::string>& argv) {
     (void)!::write(STDERR_FILENO, msg, sizeof(msg) - 1);
     ::_exit(127);
   }
+  ::setpgid(pid, pid);  // also here: whichever of parent and child runs first sets the group
   ::close(fds[1]);
   if (out_fd_ >= 0) ::close(out_fd_);
   out_fd_ = fds[0];
