@@ -1,0 +1,87 @@
+// Keyframe policy for a moving, posed camera (ROS-free; used by the keyframe_selector node and,
+// offline, to build training tuples from logged sequences).
+//
+//  * A frame becomes a keyframe when the camera moved enough since the last keyframe: its
+//    translation, its rotation, or the combined pose distance of DeepVideoMVS (Duzceker et al.
+//    2021), d = sqrt(|t|^2 + 2/3 * trace(I - R)), where (R, t) is the relative pose, exceeds its
+//    threshold (a threshold <= 0 is ignored).
+//  * The buffer keeps the newest `buffer_size` keyframes.
+//  * The neighbours of a reference are the buffered keyframes with the highest MVSNet
+//    view-selection score (core/view_selection.h) on points sampled in the reference frustum.
+#pragma once
+
+#include <cstdint>
+#include <deque>
+#include <vector>
+
+#include "unsup_mvs/core/camera.h"
+#include "unsup_mvs/core/view_selection.h"
+
+namespace umvs {
+
+struct KeyframeConfig {
+  double min_translation = 0.10;   // metres; new keyframe when the camera moved at least this far
+  double min_rotation_deg = 10.0;  // or turned at least this much
+  double min_pose_distance = 0.0;  // or the combined DeepVideoMVS distance reaches this (0 = off)
+  int buffer_size = 30;            // keyframes kept for neighbour selection
+  int num_sources = 2;             // neighbours per reference
+  double min_score = 0.5;          // a neighbour needs at least this view-selection score
+  int score_grid = 16;             // points per side sampled in the reference frustum
+  ViewScoreConfig score;
+
+  // Throws std::invalid_argument naming the bad field.
+  void validate() const;
+};
+
+struct PoseDistance {
+  double translation = 0.0;   // metres
+  double rotation_deg = 0.0;  // angle of the relative rotation
+  double combined = 0.0;      // DeepVideoMVS: sqrt(|t|^2 + 2/3 trace(I - R))
+};
+// Distance between two camera poses (T_cam_world of each camera).
+PoseDistance pose_distance(const Camera& a, const Camera& b);
+
+struct Keyframe {
+  int64_t id = 0;
+  double stamp = 0.0;  // seconds
+  Camera camera;
+};
+
+class KeyframeBuffer {
+ public:
+  explicit KeyframeBuffer(KeyframeConfig config = {});
+
+  // Whether a frame seen by `camera` moved far enough from the newest keyframe (true when empty).
+  bool is_keyframe(const Camera& camera) const;
+  // Appends a keyframe (ids increase from 0) and returns it; the oldest is evicted beyond
+  // buffer_size, its id is written to *evicted (-1 when none). The camera must be valid.
+  const Keyframe& add(const Camera& camera, double stamp, int64_t* evicted = nullptr);
+
+  // The best `num_sources` buffered keyframes for `reference_id` (best first), scored on points
+  // sampled at `depth` in its frustum. Fewer when not enough keyframes score >= min_score.
+  std::vector<ScoredView> select_sources(int64_t reference_id, double depth) const;
+  // The same against surface points that are known (e.g. from a previous depth map).
+  std::vector<ScoredView> select_sources(int64_t reference_id, const std::vector<Eigen::Vector3d>& points) const;
+
+  const Keyframe* find(int64_t id) const;  // nullptr when not (or no longer) buffered
+  const std::deque<Keyframe>& keyframes() const { return keyframes_; }
+  const KeyframeConfig& config() const { return config_; }
+  void clear();
+
+ private:
+  KeyframeConfig config_;
+  std::deque<Keyframe> keyframes_;
+  int64_t next_id_ = 0;
+};
+
+// Offline: indices of the frames of a sequence that the policy makes keyframes (the first frame
+// always is one).
+std::vector<size_t> select_keyframes(const std::vector<Camera>& cameras, const KeyframeConfig& config = {});
+
+// A depth range [near, far] from observed depths (e.g. the previous depth map): the `lo`/`hi`
+// percentiles of the finite positive values, widened by `margin` (near / (1 + margin),
+// far * (1 + margin)). Returns false when fewer than `min_count` values are usable.
+bool depth_range_from_samples(std::vector<float> depths, double* near, double* far, double lo = 0.02,
+                              double hi = 0.98, double margin = 0.2, size_t min_count = 100);
+
+}  // namespace umvs

@@ -1,0 +1,176 @@
+#include "unsup_mvs/io/bag_io.h"
+
+#include <rosbag/bag.h>
+#include <rosbag/view.h>
+#include <tf2/buffer_core.h>
+#include <tf2/exceptions.h>
+#include <tf2_msgs/TFMessage.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <filesystem>
+#include <stdexcept>
+
+#include "unsup_mvs/io/bag_messages.h"
+
+namespace umvs {
+
+BagWriter::BagWriter(const std::string& path, BagTopics topics)
+    : path_(path), tmp_path_(path + ".tmp-" + std::to_string(::getpid()) + ".bag"), topics_(std::move(topics)) {
+  bag_ = std::make_unique<rosbag::Bag>();
+  try {
+    bag_->open(tmp_path_, rosbag::bagmode::Write);
+  } catch (const std::exception& e) {
+    throw std::runtime_error("cannot write bag " + path + ": " + e.what());
+  }
+}
+
+BagWriter::~BagWriter() {
+  if (bag_) {
+    try {
+      bag_->close();
+    } catch (...) {
+    }
+    std::error_code ec;
+    std::filesystem::remove(tmp_path_, ec);
+  }
+}
+
+void BagWriter::write(const PosedImage& frame) {
+  if (!bag_) throw std::runtime_error("BagWriter: already closed");
+  if (!(frame.stamp > 0) || !std::isfinite(frame.stamp)) throw std::invalid_argument("frame stamp must be > 0");
+  frame.camera.validate("frame " + std::to_string(frames_));
+  if (frame.image.dim() != 3 || frame.image.size(0) != frame.camera.height || frame.image.size(1) != frame.camera.width) {
+    throw std::invalid_argument("frame " + std::to_string(frames_) + ": image size does not match its camera");
+  }
+  const ros::Time t(frame.stamp);
+  std_msgs::Header header;
+  header.stamp = t;
+  header.frame_id = topics_.camera_frame;
+  header.seq = static_cast<uint32_t>(frames_);
+
+  geometry_msgs::TransformStamped tf;
+  tf.header.stamp = t;
+  tf.header.frame_id = topics_.world_frame;
+  tf.child_frame_id = topics_.camera_frame;
+  const geometry_msgs::Pose pose = matrix_to_pose(frame.camera.T_world_cam());
+  tf.transform.translation.x = pose.position.x;
+  tf.transform.translation.y = pose.position.y;
+  tf.transform.translation.z = pose.position.z;
+  tf.transform.rotation = pose.orientation;
+  tf2_msgs::TFMessage tfm;
+  tfm.transforms.push_back(tf);
+
+  bag_->write("/tf", t, tfm);
+  bag_->write(topics_.camera_info, t, camera_info_from_camera(frame.camera, header));
+  bag_->write(topics_.image, t, rgb8_to_image_msg(frame.image, header));
+  ++frames_;
+}
+
+void BagWriter::close() {
+  if (!bag_) return;
+  bag_->close();
+  bag_.reset();
+  std::error_code ec;
+  std::filesystem::rename(tmp_path_, path_, ec);
+  if (ec) {
+    std::filesystem::remove(tmp_path_, ec);
+    throw std::runtime_error("cannot move the finished bag to " + path_);
+  }
+}
+
+BagReadStats for_each_posed_image(const std::string& path, const BagTopics& topics, bool rectified,
+                                  const std::function<bool(const PosedImage&)>& on_image) {
+  BagReadStats stats;
+  auto note = [&](const std::string& what) {
+    if (stats.first_error.empty()) stats.first_error = what;
+  };
+  try {
+    rosbag::Bag bag(path, rosbag::bagmode::Read);
+    // Pass 1: every transform, so that a pose can be interpolated at any image stamp.
+    rosbag::View tf_view(bag, rosbag::TopicQuery(std::vector<std::string>{"/tf", "/tf_static"}));
+    const double span = std::max(1.0, (tf_view.getEndTime() - tf_view.getBeginTime()).toSec() + 1.0);
+    tf2::BufferCore tf_buffer{ros::Duration(span)};
+    for (const rosbag::MessageInstance& m : tf_view) {
+      auto msg = m.instantiate<tf2_msgs::TFMessage>();
+      if (!msg) continue;
+      const bool is_static = m.getTopic() == "/tf_static";
+      for (const auto& t : msg->transforms) {
+        try {
+          tf_buffer.setTransform(t, "bag", is_static);
+        } catch (const std::exception& e) {
+          note(std::string("bad transform: ") + e.what());
+        }
+      }
+    }
+    // Pass 2: images with the latest camera info.
+    rosbag::View view(bag, rosbag::TopicQuery(std::vector<std::string>{topics.image, topics.camera_info}));
+    sensor_msgs::CameraInfo::ConstPtr info;
+    for (const rosbag::MessageInstance& m : view) {
+      if (m.getTopic() == topics.camera_info) {
+        if (auto i = m.instantiate<sensor_msgs::CameraInfo>()) info = i;
+        continue;
+      }
+      auto img = m.instantiate<sensor_msgs::Image>();
+      if (!img) continue;
+      ++stats.images;
+      if (!info) {
+        ++stats.without_info;
+        note("image before any CameraInfo on " + topics.camera_info);
+        continue;
+      }
+      const std::string frame = img->header.frame_id.empty() ? topics.camera_frame : img->header.frame_id;
+      PosedImage out;
+      out.stamp = img->header.stamp.toSec();
+      Eigen::Matrix4d T_world_cam;
+      try {
+        const auto tf = tf_buffer.lookupTransform(topics.world_frame, frame, img->header.stamp);
+        geometry_msgs::Pose pose;
+        pose.position.x = tf.transform.translation.x;
+        pose.position.y = tf.transform.translation.y;
+        pose.position.z = tf.transform.translation.z;
+        pose.orientation = tf.transform.rotation;
+        T_world_cam = pose_to_matrix(pose);
+      } catch (const tf2::TransformException& e) {
+        ++stats.without_pose;
+        note(std::string("no pose: ") + e.what());
+        continue;
+      } catch (const std::invalid_argument& e) {
+        ++stats.invalid;
+        note(std::string("bad pose: ") + e.what());
+        continue;
+      }
+      try {
+        out.camera = camera_from_info(*info, rectified);
+        out.camera.T_cam_world = T_world_cam.inverse();
+        out.camera.validate("image at " + std::to_string(out.stamp));
+        out.image = image_msg_to_rgb8(*img);
+        if (out.image.size(0) != out.camera.height || out.image.size(1) != out.camera.width) {
+          throw std::invalid_argument("image size differs from its CameraInfo");
+        }
+      } catch (const std::invalid_argument& e) {
+        ++stats.invalid;
+        note(e.what());
+        continue;
+      }
+      ++stats.used;
+      if (!on_image(out)) break;
+    }
+  } catch (const rosbag::BagException& e) {
+    throw std::runtime_error("cannot read bag " + path + ": " + e.what());
+  }
+  return stats;
+}
+
+std::vector<PosedImage> read_posed_images(const std::string& path, const BagTopics& topics, bool rectified,
+                                          BagReadStats* stats) {
+  std::vector<PosedImage> frames;
+  const BagReadStats s = for_each_posed_image(path, topics, rectified, [&](const PosedImage& f) {
+    frames.push_back(f);
+    return true;
+  });
+  if (stats) *stats = s;
+  return frames;
+}
+
+}  // namespace umvs

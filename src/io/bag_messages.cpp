@@ -1,0 +1,178 @@
+#include "unsup_mvs/io/bag_messages.h"
+
+#include <sensor_msgs/image_encodings.h>
+#include <torch/torch.h>
+
+#include <cmath>
+#include <cstring>
+#include <stdexcept>
+
+namespace umvs {
+
+namespace enc = sensor_msgs::image_encodings;
+
+bool is_supported_image_encoding(const std::string& e) {
+  return e == enc::RGB8 || e == enc::BGR8 || e == enc::RGBA8 || e == enc::BGRA8 || e == enc::MONO8 || e == enc::MONO16;
+}
+
+namespace {
+
+int channels_of(const std::string& e) {
+  if (e == enc::RGB8 || e == enc::BGR8) return 3;
+  if (e == enc::RGBA8 || e == enc::BGRA8) return 4;
+  return 1;
+}
+
+// The pixel rows of `msg` without padding: [H, W*bytes_per_pixel] uint8.
+torch::Tensor packed_rows(const sensor_msgs::Image& msg, int bytes_per_pixel) {
+  const int64_t H = msg.height, W = msg.width;
+  const int64_t row = W * bytes_per_pixel;
+  if (H <= 0 || W <= 0) throw std::invalid_argument("image has zero size");
+  if (msg.step < row || msg.data.size() < static_cast<size_t>(msg.step) * (H - 1) + row) {
+    throw std::invalid_argument("image data is " + std::to_string(msg.data.size()) + " bytes with step " +
+                                std::to_string(msg.step) + ", too small for " + std::to_string(W) + "x" +
+                                std::to_string(H) + " " + msg.encoding);
+  }
+  auto out = torch::empty({H, row}, torch::kUInt8);
+  for (int64_t y = 0; y < H; ++y) std::memcpy(out[y].data_ptr(), msg.data.data() + y * msg.step, row);
+  return out;
+}
+
+}  // namespace
+
+torch::Tensor image_msg_to_rgb8(const sensor_msgs::Image& msg) {
+  const std::string& e = msg.encoding;
+  if (!is_supported_image_encoding(e)) {
+    throw std::invalid_argument("unsupported image encoding '" + e +
+                                "' (accepted: rgb8, bgr8, rgba8, bgra8, mono8, mono16)");
+  }
+  const int64_t H = msg.height, W = msg.width;
+  if (e == enc::MONO16) {
+    auto raw = packed_rows(msg, 2).view({H, W, 2}).to(torch::kInt32);
+    const int hi = msg.is_bigendian ? 0 : 1;
+    auto v = raw.select(2, hi) * 256 + raw.select(2, 1 - hi);  // [H,W] 0..65535
+    auto g = (v.to(torch::kFloat32) / 257.0f).round().clamp(0, 255).to(torch::kUInt8);
+    return g.unsqueeze(2).expand({H, W, 3}).contiguous();
+  }
+  const int c = channels_of(e);
+  auto px = packed_rows(msg, c).view({H, W, c});
+  if (c == 1) return px.expand({H, W, 3}).contiguous();
+  auto rgb = px.slice(2, 0, 3);
+  if (e == enc::BGR8 || e == enc::BGRA8) rgb = rgb.flip(2);
+  return rgb.contiguous();
+}
+
+sensor_msgs::Image rgb8_to_image_msg(const torch::Tensor& rgb8, const std_msgs::Header& header) {
+  if (!rgb8.defined() || rgb8.dim() != 3 || rgb8.size(2) != 3 || rgb8.scalar_type() != torch::kUInt8) {
+    throw std::invalid_argument("rgb8_to_image_msg: need uint8 [H,W,3]");
+  }
+  auto t = rgb8.contiguous().to(torch::kCPU);
+  sensor_msgs::Image m;
+  m.header = header;
+  m.height = t.size(0);
+  m.width = t.size(1);
+  m.encoding = enc::RGB8;
+  m.is_bigendian = 0;
+  m.step = m.width * 3;
+  m.data.assign(t.data_ptr<uint8_t>(), t.data_ptr<uint8_t>() + t.numel());
+  return m;
+}
+
+sensor_msgs::Image float_to_image_msg(const torch::Tensor& values, const std_msgs::Header& header) {
+  if (!values.defined() || values.dim() != 2) throw std::invalid_argument("float_to_image_msg: need [H,W]");
+  auto t = values.to(torch::kCPU, torch::kFloat32).contiguous();
+  sensor_msgs::Image m;
+  m.header = header;
+  m.height = t.size(0);
+  m.width = t.size(1);
+  m.encoding = enc::TYPE_32FC1;
+  m.is_bigendian = 0;
+  m.step = m.width * 4;
+  const auto* p = reinterpret_cast<const uint8_t*>(t.data_ptr<float>());
+  m.data.assign(p, p + t.numel() * 4);
+  return m;
+}
+
+torch::Tensor image_msg_to_float(const sensor_msgs::Image& msg) {
+  if (msg.encoding != enc::TYPE_32FC1) {
+    throw std::invalid_argument("expected a 32FC1 image, got '" + msg.encoding + "'");
+  }
+  if (msg.is_bigendian) throw std::invalid_argument("big-endian 32FC1 images are not supported");
+  auto rows = packed_rows(msg, 4);
+  return rows.view(torch::kFloat32).view({static_cast<int64_t>(msg.height), static_cast<int64_t>(msg.width)}).clone();
+}
+
+Camera camera_from_info(const sensor_msgs::CameraInfo& info, bool rectified) {
+  if (info.width == 0 || info.height == 0) throw std::invalid_argument("camera_info has zero image size");
+  if (info.binning_x > 1 || info.binning_y > 1) throw std::invalid_argument("camera_info with binning is not supported");
+  if (info.roi.width != 0 && (info.roi.width != info.width || info.roi.height != info.height)) {
+    throw std::invalid_argument("camera_info with a region of interest is not supported");
+  }
+  Camera c;
+  c.width = static_cast<int>(info.width);
+  c.height = static_cast<int>(info.height);
+  const bool has_p = info.P[0] != 0.0 && info.P[5] != 0.0;
+  if (rectified && has_p) {
+    c.K << info.P[0], info.P[1], info.P[2], info.P[4], info.P[5], info.P[6], info.P[8], info.P[9], info.P[10];
+  } else {
+    c.K << info.K[0], info.K[1], info.K[2], info.K[3], info.K[4], info.K[5], info.K[6], info.K[7], info.K[8];
+  }
+  if (!rectified) {
+    for (double d : info.D) {
+      if (d != 0.0) {
+        throw std::invalid_argument("camera_info has non-zero distortion coefficients (model '" + info.distortion_model +
+                                    "'); feed rectified images (image_proc image_rect_color) and set rectified:=true");
+      }
+    }
+  }
+  c.validate("camera_info");
+  return c;
+}
+
+sensor_msgs::CameraInfo camera_info_from_camera(const Camera& camera, const std_msgs::Header& header) {
+  sensor_msgs::CameraInfo info;
+  info.header = header;
+  info.width = camera.width;
+  info.height = camera.height;
+  info.distortion_model = "plumb_bob";
+  info.D.assign(5, 0.0);
+  for (int r = 0; r < 3; ++r) {
+    for (int col = 0; col < 3; ++col) {
+      info.K[r * 3 + col] = camera.K(r, col);
+      info.P[r * 4 + col] = camera.K(r, col);
+    }
+  }
+  info.R = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+  return info;
+}
+
+Eigen::Matrix4d pose_to_matrix(const geometry_msgs::Pose& pose) {
+  const auto& p = pose.position;
+  const auto& o = pose.orientation;
+  for (double v : {p.x, p.y, p.z, o.x, o.y, o.z, o.w}) {
+    if (!std::isfinite(v)) throw std::invalid_argument("pose has non-finite values");
+  }
+  Eigen::Quaterniond q(o.w, o.x, o.y, o.z);
+  if (std::abs(q.norm() - 1.0) > 1e-3) {
+    throw std::invalid_argument("pose orientation is not a unit quaternion (norm " + std::to_string(q.norm()) + ")");
+  }
+  Eigen::Matrix4d T = Eigen::Matrix4d::Identity();
+  T.topLeftCorner<3, 3>() = q.normalized().toRotationMatrix();
+  T.topRightCorner<3, 1>() = Eigen::Vector3d(p.x, p.y, p.z);
+  return T;
+}
+
+geometry_msgs::Pose matrix_to_pose(const Eigen::Matrix4d& T) {
+  const Eigen::Quaterniond q(Eigen::Matrix3d(T.topLeftCorner<3, 3>()));
+  geometry_msgs::Pose pose;
+  pose.position.x = T(0, 3);
+  pose.position.y = T(1, 3);
+  pose.position.z = T(2, 3);
+  pose.orientation.w = q.w();
+  pose.orientation.x = q.x();
+  pose.orientation.y = q.y();
+  pose.orientation.z = q.z();
+  return pose;
+}
+
+}  // namespace umvs

@@ -1,0 +1,191 @@
+// fusion: DepthEstimate stream -> core::StreamingFusion -> PointCloud2 (xyz + rgb in the world
+// frame). `cloud` carries the whole (bounded) map at ~publish_rate Hz, `cloud_increment` the
+// points each depth estimate adds, as soon as they exist. See docs/ros.md.
+#include <nodelet/nodelet.h>
+#include <pluginlib/class_list_macros.hpp>
+#include <ros/ros.h>
+#include <sensor_msgs/PointCloud2.h>
+#include <sensor_msgs/point_cloud2_iterator.h>
+#include <torch/torch.h>
+
+#include <boost/make_shared.hpp>
+#include <mutex>
+
+#include "unsup_mvs/DepthEstimate.h"
+#include "unsup_mvs/ResetFusion.h"
+#include "unsup_mvs/SaveCloud.h"
+#include "unsup_mvs/core/device.h"
+#include "unsup_mvs/core/fusion.h"
+#include "unsup_mvs/io/bag_messages.h"
+#include "unsup_mvs/io/ply.h"
+#include "unsup_mvs/ros/nodelets.h"
+#include "unsup_mvs/ros/params.h"
+
+namespace umvs_ros {
+
+namespace {
+
+sensor_msgs::PointCloud2 to_cloud_msg(const umvs::PointCloud& cloud, const std::string& frame, const ros::Time& stamp) {
+  sensor_msgs::PointCloud2 msg;
+  msg.header.frame_id = frame;
+  msg.header.stamp = stamp;
+  sensor_msgs::PointCloud2Modifier modifier(msg);
+  modifier.setPointCloud2FieldsByString(2, "xyz", "rgb");
+  modifier.resize(cloud.size());
+  msg.height = 1;
+  msg.width = static_cast<uint32_t>(cloud.size());
+  msg.is_dense = true;
+  sensor_msgs::PointCloud2Iterator<float> x(msg, "x"), y(msg, "y"), z(msg, "z");
+  sensor_msgs::PointCloud2Iterator<uint8_t> r(msg, "r"), g(msg, "g"), b(msg, "b");
+  for (size_t i = 0; i < cloud.size(); ++i, ++x, ++y, ++z, ++r, ++g, ++b) {
+    *x = cloud.points[i].x();
+    *y = cloud.points[i].y();
+    *z = cloud.points[i].z();
+    const std::array<uint8_t, 3> c = cloud.has_colors() ? cloud.colors[i] : std::array<uint8_t, 3>{200, 200, 200};
+    *r = c[0];
+    *g = c[1];
+    *b = c[2];
+  }
+  return msg;
+}
+
+}  // namespace
+
+class FusionNodelet : public nodelet::Nodelet {
+ private:
+  void onInit() override {
+    ros::NodeHandle& nh = getNodeHandle();
+    ros::NodeHandle& pnh = getPrivateNodeHandle();
+    pnh.param<std::string>("world_frame", world_frame_, "world");
+    int window = 8, max_points = 2000000;
+    double publish_rate = 1.0;
+    std::string device_name;
+    pnh.param("window", window, window);
+    pnh.param("max_points", max_points, max_points);
+    pnh.param("publish_rate", publish_rate, publish_rate);
+    pnh.param<std::string>("device", device_name, "cpu");
+    pnh.param<std::string>("default_save_path", default_save_path_, "unsup_mvs_cloud.ply");
+    try {
+      if (window < 1) throw std::invalid_argument("window must be >= 1");
+      if (max_points < 1) throw std::invalid_argument("max_points must be >= 1");
+      if (!(publish_rate > 0)) throw std::invalid_argument("publish_rate must be > 0");
+      fusion_ = std::make_unique<umvs::StreamingFusion>(fusion_config_from_ros(pnh), window,
+                                                        static_cast<size_t>(max_points), umvs::parse_device(device_name));
+    } catch (const std::exception& e) {
+      NODELET_FATAL("fusion: invalid parameters: %s", e.what());
+      throw;
+    }
+    cloud_pub_ = nh.advertise<sensor_msgs::PointCloud2>("cloud", 1, true);
+    increment_pub_ = nh.advertise<sensor_msgs::PointCloud2>("cloud_increment", 5);
+    estimate_sub_ = nh.subscribe("depth_estimate", 5, &FusionNodelet::onEstimate, this);
+    save_srv_ = pnh.advertiseService("save_cloud", &FusionNodelet::onSave, this);
+    reset_srv_ = pnh.advertiseService("reset", &FusionNodelet::onReset, this);
+    timer_ = nh.createWallTimer(ros::WallDuration(1.0 / publish_rate), &FusionNodelet::onTimer, this);
+    const auto& c = fusion_->config();
+    NODELET_INFO("fusion: window %d, at most %d points, voxel %.3f m, a point needs %d agreeing views "
+                 "(%.1f px, %.1f%% depth, confidence >= %.2f), map published at %.1f Hz in '%s'",
+                 window, max_points, c.voxel_size, c.min_agreeing_views, c.max_reprojection_px,
+                 100 * c.max_relative_depth, c.min_confidence, publish_rate, world_frame_.c_str());
+  }
+
+  void onEstimate(const unsup_mvs::DepthEstimateConstPtr& msg) {
+    umvs::FusionView view;
+    try {
+      if (!msg->world_frame.empty() && msg->world_frame != world_frame_) {
+        throw std::invalid_argument("its pose is in '" + msg->world_frame + "', this node fuses in '" + world_frame_ + "'");
+      }
+      view.id = msg->keyframe_id;
+      view.depth = umvs::image_msg_to_float(msg->depth);
+      view.confidence = umvs::image_msg_to_float(msg->confidence);
+      view.camera = umvs::camera_from_info(msg->camera_info, true);
+      view.camera.T_cam_world = umvs::pose_to_matrix(msg->pose).inverse();
+      view.camera.validate("depth estimate camera");
+      if (!msg->image.data.empty()) {
+        view.color = umvs::image_msg_to_rgb8(msg->image);
+        if (view.color.size(0) != view.depth.size(0) || view.color.size(1) != view.depth.size(1)) view.color = torch::Tensor();
+      }
+    } catch (const std::exception& e) {
+      NODELET_ERROR_THROTTLE(5.0, "fusion: depth estimate %u skipped: %s", msg->keyframe_id, e.what());
+      return;
+    }
+    std::lock_guard<std::mutex> lock(mutex_);
+    try {
+      const auto t0 = ros::WallTime::now();
+      const umvs::PointCloud added = fusion_->add(view);
+      ++estimates_;
+      if (!added.empty() && increment_pub_.getNumSubscribers() > 0) {
+        increment_pub_.publish(to_cloud_msg(added, world_frame_, msg->header.stamp));
+      }
+      last_stamp_ = msg->header.stamp;
+      dirty_ = dirty_ || !added.empty();
+      NODELET_INFO_THROTTLE(5.0, "fusion: depth estimate %u added %zu points in %.2f s; %zu points from %ld estimates",
+                            msg->keyframe_id, added.size(), (ros::WallTime::now() - t0).toSec(), fusion_->cloud().size(),
+                            estimates_);
+    } catch (const std::exception& e) {
+      NODELET_ERROR_THROTTLE(5.0, "fusion: depth estimate %u skipped: %s", msg->keyframe_id, e.what());
+    }
+  }
+
+  void onTimer(const ros::WallTimerEvent&) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (!dirty_) return;
+    cloud_pub_.publish(to_cloud_msg(fusion_->cloud(), world_frame_, last_stamp_));
+    dirty_ = false;
+  }
+
+  bool onSave(unsup_mvs::SaveCloud::Request& req, unsup_mvs::SaveCloud::Response& res) {
+    const std::string path = req.path.empty() ? default_save_path_ : req.path;
+    umvs::PointCloud copy;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      copy = fusion_->cloud();
+    }
+    res.num_points = copy.size();
+    if (copy.empty()) {
+      res.success = false;
+      res.message = "the cloud is empty; nothing written to " + path;
+      NODELET_WARN("fusion: %s", res.message.c_str());
+      return true;
+    }
+    try {
+      umvs::write_ply(path, copy);
+      res.success = true;
+      res.message = "wrote " + std::to_string(copy.size()) + " points to " + path;
+      NODELET_INFO("fusion: %s", res.message.c_str());
+    } catch (const std::exception& e) {
+      res.success = false;
+      res.message = std::string("cannot save the cloud: ") + e.what();
+      NODELET_ERROR("fusion: %s", res.message.c_str());
+    }
+    return true;
+  }
+
+  bool onReset(unsup_mvs::ResetFusion::Request&, unsup_mvs::ResetFusion::Response& res) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    const size_t before = fusion_->cloud().size();
+    fusion_->reset();
+    estimates_ = 0;
+    dirty_ = true;  // publish the empty map once
+    res.success = true;
+    res.message = "cleared " + std::to_string(before) + " points";
+    NODELET_INFO("fusion: %s", res.message.c_str());
+    return true;
+  }
+
+  std::string world_frame_, default_save_path_;
+  std::mutex mutex_;
+  std::unique_ptr<umvs::StreamingFusion> fusion_;
+  long estimates_ = 0;
+  bool dirty_ = false;
+  ros::Time last_stamp_;
+  ros::Publisher cloud_pub_, increment_pub_;
+  ros::Subscriber estimate_sub_;
+  ros::ServiceServer save_srv_, reset_srv_;
+  ros::WallTimer timer_;
+};
+
+boost::shared_ptr<nodelet::Nodelet> make_fusion_nodelet() { return boost::make_shared<FusionNodelet>(); }
+
+}  // namespace umvs_ros
+
+PLUGINLIB_EXPORT_CLASS(umvs_ros::FusionNodelet, nodelet::Nodelet)

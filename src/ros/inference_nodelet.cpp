@@ -1,0 +1,292 @@
+// inference: KeyframeSet -> MVSNet -> DepthEstimate (+ depth and confidence images). Thin around
+// core::DepthEstimator. The network runs on a worker thread; when it is busy only the newest
+// keyframe set waits (latest wins). See docs/ros.md for topics and parameters.
+#include <diagnostic_msgs/DiagnosticArray.h>
+#include <image_transport/image_transport.h>
+#include <nodelet/nodelet.h>
+#include <pluginlib/class_list_macros.hpp>
+#include <ros/ros.h>
+#include <torch/torch.h>
+
+#include <atomic>
+#include <boost/make_shared.hpp>
+#include <condition_variable>
+#include <mutex>
+#include <thread>
+
+#include "unsup_mvs/DepthEstimate.h"
+#include "unsup_mvs/KeyframeSet.h"
+#include "unsup_mvs/ReloadModel.h"
+#include "unsup_mvs/core/depth_estimator.h"
+#include "unsup_mvs/core/device.h"
+#include "unsup_mvs/io/bag_messages.h"
+#include "unsup_mvs/io/checkpoint.h"
+#include "unsup_mvs/ros/nodelets.h"
+
+namespace umvs_ros {
+
+namespace {
+
+umvs::ViewInput view_from_msg(const sensor_msgs::Image& image, const sensor_msgs::CameraInfo& info,
+                              const geometry_msgs::Pose& pose, bool rectified, const std::string& name) {
+  try {
+    umvs::ViewInput v;
+    v.camera = umvs::camera_from_info(info, rectified);
+    v.camera.T_cam_world = umvs::pose_to_matrix(pose).inverse();
+    v.camera.validate(name);
+    v.image = umvs::image_msg_to_rgb8(image);
+    return v;
+  } catch (const std::exception& e) {
+    throw std::invalid_argument(name + ": " + e.what());
+  }
+}
+
+}  // namespace
+
+class InferenceNodelet : public nodelet::Nodelet {
+ public:
+  ~InferenceNodelet() override {
+    {
+      std::lock_guard<std::mutex> lock(queue_mutex_);
+      stop_ = true;
+    }
+    queue_cv_.notify_all();
+    if (worker_.joinable()) worker_.join();
+  }
+
+ private:
+  void onInit() override {
+    ros::NodeHandle& nh = getNodeHandle();
+    ros::NodeHandle& pnh = getPrivateNodeHandle();
+    std::string device_name;
+    pnh.param<std::string>("device", device_name, "cpu");
+    pnh.param("threads", threads_, 0);
+    pnh.param("num_depth", config_.num_depth, 0);
+    pnh.param("max_width", config_.max_width, 640);
+    pnh.param("max_height", config_.max_height, 512);
+    pnh.param("rectified", rectified_, false);
+    pnh.param<std::string>("checkpoint", checkpoint_, "");
+    try {
+      device_ = umvs::parse_device(device_name);
+      if (config_.num_depth != 0 && (config_.num_depth < 8 || config_.num_depth % 8 != 0)) {
+        throw std::invalid_argument("num_depth must be 0 (the checkpoint's) or a positive multiple of 8");
+      }
+    } catch (const std::exception& e) {
+      NODELET_FATAL("inference: invalid parameters: %s", e.what());
+      throw;
+    }
+    umvs::configure_threads(threads_);
+
+    std::string message;
+    if (checkpoint_.empty()) {
+      NODELET_ERROR("inference: no ~checkpoint parameter; load one with the reload_model service");
+    } else if (!loadModel(checkpoint_, &message)) {
+      NODELET_ERROR("inference: %s; load another one with the reload_model service", message.c_str());
+    } else {
+      NODELET_INFO("inference: %s", message.c_str());
+    }
+
+    it_ = std::make_unique<image_transport::ImageTransport>(nh);
+    auto connect = [this](const ros::SingleSubscriberPublisher&) { updateSubscription(); };
+    auto it_connect = [this](const image_transport::SingleSubscriberPublisher&) { updateSubscription(); };
+    {
+      std::lock_guard<std::mutex> lock(connect_mutex_);
+      estimate_pub_ = nh.advertise<unsup_mvs::DepthEstimate>("depth_estimate", 2, connect, connect);
+      depth_pub_ = it_->advertise("depth", 2, it_connect, it_connect);
+      confidence_pub_ = it_->advertise("confidence", 2, it_connect, it_connect);
+    }
+    diagnostics_pub_ = nh.advertise<diagnostic_msgs::DiagnosticArray>("/diagnostics", 5);
+    reload_srv_ = pnh.advertiseService("reload_model", &InferenceNodelet::onReload, this);
+    worker_ = std::thread(&InferenceNodelet::work, this);
+  }
+
+  // Lazy subscription: keyframe sets are only received while someone listens to an output.
+  void updateSubscription() {
+    std::lock_guard<std::mutex> lock(connect_mutex_);
+    const bool wanted = estimate_pub_.getNumSubscribers() > 0 || depth_pub_.getNumSubscribers() > 0 ||
+                        confidence_pub_.getNumSubscribers() > 0;
+    if (wanted && !keyframes_sub_) {
+      keyframes_sub_ = getNodeHandle().subscribe("keyframes", 1, &InferenceNodelet::onKeyframes, this);
+    } else if (!wanted && keyframes_sub_) {
+      keyframes_sub_.shutdown();
+    }
+  }
+
+  void onKeyframes(const unsup_mvs::KeyframeSetConstPtr& msg) {
+    {
+      std::lock_guard<std::mutex> lock(queue_mutex_);
+      if (pending_) ++dropped_;  // the older waiting set is stale now
+      pending_ = msg;
+    }
+    queue_cv_.notify_one();
+  }
+
+  void work() {
+    while (true) {
+      unsup_mvs::KeyframeSetConstPtr set;
+      {
+        std::unique_lock<std::mutex> lock(queue_mutex_);
+        queue_cv_.wait(lock, [this] { return stop_ || pending_; });
+        if (stop_) return;
+        set = pending_;
+        pending_.reset();
+      }
+      try {
+        process(*set);
+      } catch (const std::exception& e) {
+        ++failed_;
+        NODELET_ERROR_THROTTLE(5.0, "inference: keyframe set %u skipped: %s", set->reference_id, e.what());
+      }
+    }
+  }
+
+  void process(const unsup_mvs::KeyframeSet& set) {
+    const auto t0 = ros::WallTime::now();
+    if (set.source_images.size() != set.source_infos.size() || set.source_images.size() != set.source_poses.size() ||
+        set.source_images.empty()) {
+      throw std::invalid_argument("needs as many source images, camera_infos and poses (>= 1), got " +
+                                  std::to_string(set.source_images.size()) + ", " + std::to_string(set.source_infos.size()) +
+                                  ", " + std::to_string(set.source_poses.size()));
+    }
+    if (!(set.depth_min > 0 && set.depth_max > set.depth_min)) {
+      throw std::invalid_argument("impossible depth range " + std::to_string(set.depth_min) + " - " +
+                                  std::to_string(set.depth_max));
+    }
+    std::vector<umvs::ViewInput> views;
+    views.push_back(view_from_msg(set.reference_image, set.reference_info, set.reference_pose, rectified_, "reference"));
+    for (size_t i = 0; i < set.source_images.size(); ++i) {
+      views.push_back(view_from_msg(set.source_images[i], set.source_infos[i], set.source_poses[i], rectified_,
+                                    "source " + std::to_string(set.source_ids.size() > i ? set.source_ids[i] : i)));
+    }
+    umvs::DepthMap map;
+    {
+      std::lock_guard<std::mutex> lock(model_mutex_);
+      if (!estimator_) throw std::runtime_error("no model loaded (set ~checkpoint or call reload_model)");
+      map = estimator_->estimate(views, set.depth_min, set.depth_max);
+    }
+    std_msgs::Header header = set.reference_image.header;  // stamp and optical frame of the reference
+    unsup_mvs::DepthEstimate out;
+    out.header = header;
+    out.keyframe_id = set.reference_id;
+    out.depth = umvs::float_to_image_msg(map.depth, header);
+    out.confidence = umvs::float_to_image_msg(map.confidence, header);
+    out.image = umvs::rgb8_to_image_msg(map.color, header);
+    out.camera_info = umvs::camera_info_from_camera(map.camera, header);
+    out.world_frame = set.header.frame_id;
+    out.pose = set.reference_pose;
+    out.depth_min = set.depth_min;
+    out.depth_max = set.depth_max;
+    out.inference_seconds = static_cast<float>(map.seconds);
+    estimate_pub_.publish(out);
+    if (depth_pub_.getNumSubscribers() > 0) depth_pub_.publish(out.depth);
+    if (confidence_pub_.getNumSubscribers() > 0) confidence_pub_.publish(out.confidence);
+
+    const double total = (ros::WallTime::now() - t0).toSec();
+    const double latency = (ros::Time::now() - header.stamp).toSec();
+    ++processed_;
+    seconds_sum_ += total;
+    NODELET_INFO_THROTTLE(5.0, "inference: keyframe %u: %dx%d depth map in %.2f s (network %.2f s), %.2f s after the "
+                          "image; %ld done, %ld stale sets dropped, %ld failed",
+                          set.reference_id, map.camera.width, map.camera.height, total, map.seconds, latency, processed_,
+                          dropped_.load(), failed_.load());
+    publishDiagnostics(total, map.seconds, latency);
+  }
+
+  void publishDiagnostics(double total, double network, double latency) {
+    diagnostic_msgs::DiagnosticArray array;
+    array.header.stamp = ros::Time::now();
+    diagnostic_msgs::DiagnosticStatus status;
+    status.level = diagnostic_msgs::DiagnosticStatus::OK;
+    status.name = "unsup_mvs: " + getName();
+    status.hardware_id = device_.str();
+    status.message = "depth map in " + std::to_string(total) + " s";
+    auto kv = [&](const std::string& k, const std::string& v) {
+      diagnostic_msgs::KeyValue p;
+      p.key = k;
+      p.value = v;
+      status.values.push_back(p);
+    };
+    kv("processed", std::to_string(processed_));
+    kv("dropped_stale", std::to_string(dropped_.load()));
+    kv("failed", std::to_string(failed_.load()));
+    kv("last_total_s", std::to_string(total));
+    kv("last_network_s", std::to_string(network));
+    kv("last_latency_s", std::to_string(latency));
+    kv("mean_total_s", std::to_string(seconds_sum_ / std::max(1L, processed_)));
+    kv("checkpoint", checkpoint_);
+    array.status.push_back(status);
+    diagnostics_pub_.publish(array);
+  }
+
+  // Loads `path`, checks it (architecture, a forward pass with finite output) and swaps it in.
+  // On failure the current model stays and *message says why.
+  bool loadModel(const std::string& path, std::string* message) {
+    try {
+      umvs::LoadedModel loaded = umvs::load_model(path, device_);
+      auto candidate = std::make_unique<umvs::DepthEstimator>(loaded.model, device_, config_);
+      // Smoke test: a fronto-parallel camera pair of 64x64 with 8 planes.
+      umvs::Camera cam;
+      cam.width = cam.height = 64;
+      cam.K << 50, 0, 31.5, 0, 50, 31.5, 0, 0, 1;
+      umvs::Camera cam2 = cam;
+      cam2.T_cam_world(0, 3) = -0.1;
+      auto image = torch::randint(0, 255, {64, 64, 3}, torch::kUInt8);
+      umvs::DepthEstimator probe(loaded.model, device_, umvs::DepthEstimatorConfig{0, 0, 8});
+      const umvs::DepthMap test = probe.estimate({{image, cam}, {image, cam2}}, 1.0, 2.0);
+      if (!torch::isfinite(test.depth).all().item<bool>() || !torch::isfinite(test.confidence).all().item<bool>()) {
+        throw std::runtime_error("a test forward pass gives non-finite depth or confidence");
+      }
+      std::lock_guard<std::mutex> lock(model_mutex_);
+      estimator_ = std::move(candidate);
+      checkpoint_ = path;
+      *message = "loaded " + path + " (" + loaded.format + ", " + loaded.model->config().to_string() + "), " +
+                 std::to_string(estimator_->num_depth()) + " depth planes on " + device_.str() + ", " +
+                 std::to_string(torch::get_num_threads()) + " threads";
+      return true;
+    } catch (const std::exception& e) {
+      *message = "model " + path + " refused: " + e.what();
+      return false;
+    }
+  }
+
+  bool onReload(unsup_mvs::ReloadModel::Request& req, unsup_mvs::ReloadModel::Response& res) {
+    res.success = loadModel(req.checkpoint, &res.message);
+    if (res.success) {
+      NODELET_INFO("inference: %s", res.message.c_str());
+    } else {
+      NODELET_ERROR("inference: %s; keeping %s", res.message.c_str(),
+                    estimator_ ? ("the model from " + checkpoint_).c_str() : "no model");
+    }
+    return true;
+  }
+
+  torch::Device device_{torch::kCPU};
+  int threads_ = 0;
+  bool rectified_ = false;
+  umvs::DepthEstimatorConfig config_;
+  std::string checkpoint_;
+  std::mutex model_mutex_;
+  std::unique_ptr<umvs::DepthEstimator> estimator_;
+
+  std::mutex queue_mutex_;
+  std::condition_variable queue_cv_;
+  unsup_mvs::KeyframeSetConstPtr pending_;
+  bool stop_ = false;
+  std::thread worker_;
+  std::atomic<long> dropped_{0}, failed_{0};
+  long processed_ = 0;
+  double seconds_sum_ = 0.0;
+
+  std::mutex connect_mutex_;
+  std::unique_ptr<image_transport::ImageTransport> it_;
+  ros::Publisher estimate_pub_, diagnostics_pub_;
+  image_transport::Publisher depth_pub_, confidence_pub_;
+  ros::Subscriber keyframes_sub_;
+  ros::ServiceServer reload_srv_;
+};
+
+boost::shared_ptr<nodelet::Nodelet> make_inference_nodelet() { return boost::make_shared<InferenceNodelet>(); }
+
+}  // namespace umvs_ros
+
+PLUGINLIB_EXPORT_CLASS(umvs_ros::InferenceNodelet, nodelet::Nodelet)

@@ -1,0 +1,235 @@
+// keyframe_selector: calibrated, posed images -> KeyframeSet (a reference keyframe + its best
+// neighbours) whenever the camera moved enough. See docs/ros.md for topics and parameters.
+#include <geometry_msgs/PoseArray.h>
+#include <image_transport/image_transport.h>
+#include <image_transport/subscriber_filter.h>
+#include <message_filters/subscriber.h>
+#include <message_filters/sync_policies/approximate_time.h>
+#include <message_filters/sync_policies/exact_time.h>
+#include <message_filters/synchronizer.h>
+#include <nodelet/nodelet.h>
+#include <pluginlib/class_list_macros.hpp>
+#include <ros/ros.h>
+#include <sensor_msgs/CameraInfo.h>
+#include <sensor_msgs/Image.h>
+#include <tf2_ros/buffer.h>
+#include <tf2_ros/transform_listener.h>
+
+#include <boost/make_shared.hpp>
+#include <map>
+#include <mutex>
+
+#include "unsup_mvs/DepthEstimate.h"
+#include "unsup_mvs/KeyframeSet.h"
+#include "unsup_mvs/core/keyframes.h"
+#include "unsup_mvs/io/bag_messages.h"
+#include "unsup_mvs/ros/nodelets.h"
+#include "unsup_mvs/ros/params.h"
+
+namespace umvs_ros {
+
+class KeyframeSelectorNodelet : public nodelet::Nodelet {
+ public:
+  ~KeyframeSelectorNodelet() override = default;
+
+ private:
+  using ExactPolicy = message_filters::sync_policies::ExactTime<sensor_msgs::Image, sensor_msgs::CameraInfo>;
+  using ApproxPolicy = message_filters::sync_policies::ApproximateTime<sensor_msgs::Image, sensor_msgs::CameraInfo>;
+
+  struct StoredFrame {
+    sensor_msgs::ImageConstPtr image;
+    sensor_msgs::CameraInfoConstPtr info;
+    geometry_msgs::Pose pose;  // T_world_camera
+  };
+
+  void onInit() override {
+    ros::NodeHandle& nh = getNodeHandle();
+    ros::NodeHandle& pnh = getPrivateNodeHandle();
+    pnh.param<std::string>("world_frame", world_frame_, "world");
+    pnh.param("tf_timeout", tf_timeout_, 0.1);
+    pnh.param("rectified", rectified_, false);
+    pnh.param("depth_min", depth_min_, 0.3);
+    pnh.param("depth_max", depth_max_, 10.0);
+    pnh.param("depth_from_estimates", depth_from_estimates_, true);
+    int queue_size = 10;
+    pnh.param("queue_size", queue_size, queue_size);
+    bool approximate_sync = false;
+    pnh.param("approximate_sync", approximate_sync, approximate_sync);
+    try {
+      buffer_ = std::make_unique<umvs::KeyframeBuffer>(keyframe_config_from_ros(pnh));
+      if (!(depth_min_ > 0 && depth_max_ > depth_min_)) {
+        throw std::invalid_argument("need 0 < depth_min < depth_max, got " + std::to_string(depth_min_) + ", " +
+                                    std::to_string(depth_max_));
+      }
+      if (queue_size < 1) throw std::invalid_argument("queue_size must be >= 1");
+    } catch (const std::exception& e) {
+      NODELET_FATAL("keyframe_selector: invalid parameters: %s", e.what());
+      throw;
+    }
+
+    tf_buffer_ = std::make_unique<tf2_ros::Buffer>(ros::Duration(30.0));
+    tf_listener_ = std::make_unique<tf2_ros::TransformListener>(*tf_buffer_, nh);
+    keyframes_pub_ = nh.advertise<unsup_mvs::KeyframeSet>("keyframes", 2);
+    poses_pub_ = nh.advertise<geometry_msgs::PoseArray>("keyframe_poses", 1, true);
+    if (depth_from_estimates_) estimate_sub_ = nh.subscribe("depth_estimate", 1, &KeyframeSelectorNodelet::onEstimate, this);
+
+    it_ = std::make_unique<image_transport::ImageTransport>(nh);
+    const image_transport::TransportHints hints("raw", ros::TransportHints(), pnh);
+    image_sub_.subscribe(*it_, "image", queue_size, hints);
+    info_sub_.subscribe(nh, "camera_info", queue_size);
+    if (approximate_sync) {
+      approx_sync_ = std::make_unique<message_filters::Synchronizer<ApproxPolicy>>(ApproxPolicy(queue_size), image_sub_, info_sub_);
+      approx_sync_->registerCallback(&KeyframeSelectorNodelet::onImage, this);
+    } else {
+      exact_sync_ = std::make_unique<message_filters::Synchronizer<ExactPolicy>>(ExactPolicy(queue_size), image_sub_, info_sub_);
+      exact_sync_->registerCallback(&KeyframeSelectorNodelet::onImage, this);
+    }
+    const auto& c = buffer_->config();
+    NODELET_INFO("keyframe_selector: %s + %s in '%s' (%s sync), keyframe after %.2f m / %.1f deg / pose distance %.2f, "
+                 "buffer %d, %d neighbours, depth %.2f-%.2f m%s",
+                 image_sub_.getTopic().c_str(), info_sub_.getTopic().c_str(), world_frame_.c_str(),
+                 approximate_sync ? "approximate" : "exact", c.min_translation, c.min_rotation_deg, c.min_pose_distance,
+                 c.buffer_size, c.num_sources, depth_min_, depth_max_,
+                 depth_from_estimates_ ? " (then from depth estimates)" : "");
+  }
+
+  void onImage(const sensor_msgs::ImageConstPtr& image, const sensor_msgs::CameraInfoConstPtr& info) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (!umvs::is_supported_image_encoding(image->encoding)) {
+      NODELET_ERROR_THROTTLE(5.0, "keyframe_selector: image encoding '%s' is not supported (use rgb8, bgr8, rgba8, "
+                             "bgra8, mono8 or mono16); frame skipped", image->encoding.c_str());
+      return;
+    }
+    umvs::Camera camera;
+    try {
+      camera = umvs::camera_from_info(*info, rectified_);
+    } catch (const std::exception& e) {
+      NODELET_ERROR_THROTTLE(5.0, "keyframe_selector: bad camera_info: %s; frame skipped", e.what());
+      return;
+    }
+    if (image->width != info->width || image->height != info->height) {
+      NODELET_ERROR_THROTTLE(5.0, "keyframe_selector: image is %ux%u but camera_info says %ux%u; frame skipped",
+                             image->width, image->height, info->width, info->height);
+      return;
+    }
+    const std::string& camera_frame = image->header.frame_id;
+    geometry_msgs::TransformStamped tf;
+    try {
+      tf = tf_buffer_->lookupTransform(world_frame_, camera_frame, image->header.stamp, ros::Duration(tf_timeout_));
+    } catch (const tf2::TransformException& e) {
+      NODELET_WARN_THROTTLE(5.0, "keyframe_selector: no transform %s -> '%s' at %.3f: %s; frame skipped",
+                            world_frame_.c_str(), camera_frame.c_str(), image->header.stamp.toSec(), e.what());
+      return;
+    }
+    geometry_msgs::Pose pose;
+    pose.position.x = tf.transform.translation.x;
+    pose.position.y = tf.transform.translation.y;
+    pose.position.z = tf.transform.translation.z;
+    pose.orientation = tf.transform.rotation;
+    try {
+      camera.T_cam_world = umvs::pose_to_matrix(pose).inverse();
+      camera.validate("camera pose");
+    } catch (const std::exception& e) {
+      NODELET_ERROR_THROTTLE(5.0, "keyframe_selector: invalid pose of '%s' in '%s' at %.3f: %s; frame skipped",
+                             camera_frame.c_str(), world_frame_.c_str(), image->header.stamp.toSec(), e.what());
+      return;
+    }
+    ++frames_;
+    if (!buffer_->is_keyframe(camera)) return;
+
+    int64_t evicted = -1;
+    const umvs::Keyframe& ref = buffer_->add(camera, image->header.stamp.toSec(), &evicted);
+    frames_by_id_[ref.id] = {image, info, pose};
+    if (evicted >= 0) frames_by_id_.erase(evicted);
+    publishPoses(image->header.stamp);
+
+    double near = depth_min_, far = depth_max_;
+    if (have_estimate_range_) {
+      near = estimate_near_;
+      far = estimate_far_;
+    }
+    const auto sources = buffer_->select_sources(ref.id, 0.5 * (near + far));
+    if (static_cast<int>(sources.size()) < buffer_->config().num_sources) {
+      NODELET_DEBUG("keyframe_selector: keyframe %ld has %zu usable neighbours, waiting for more", static_cast<long>(ref.id),
+                    sources.size());
+      return;
+    }
+    unsup_mvs::KeyframeSet set;
+    set.header.stamp = image->header.stamp;
+    set.header.frame_id = world_frame_;
+    set.reference_id = static_cast<uint32_t>(ref.id);
+    set.reference_image = *image;
+    set.reference_info = *info;
+    set.reference_pose = pose;
+    for (const auto& s : sources) {
+      const StoredFrame& f = frames_by_id_.at(s.index);
+      set.source_ids.push_back(static_cast<uint32_t>(s.index));
+      set.source_images.push_back(*f.image);
+      set.source_infos.push_back(*f.info);
+      set.source_poses.push_back(f.pose);
+    }
+    set.depth_min = static_cast<float>(near);
+    set.depth_max = static_cast<float>(far);
+    keyframes_pub_.publish(set);
+    ++sets_;
+    NODELET_INFO_THROTTLE(10.0, "keyframe_selector: %ld frames, %ld keyframe sets; keyframe %ld with %u, %u, depth %.2f-%.2f m",
+                          frames_, sets_, static_cast<long>(ref.id), set.source_ids[0],
+                          set.source_ids.size() > 1 ? set.source_ids[1] : 0u, near, far);
+  }
+
+  // Depth range for the next keyframes from the latest depth estimate (confident pixels only).
+  void onEstimate(const unsup_mvs::DepthEstimateConstPtr& msg) {
+    try {
+      const auto depth = umvs::image_msg_to_float(msg->depth);
+      const auto conf = umvs::image_msg_to_float(msg->confidence);
+      if (!depth.sizes().equals(conf.sizes())) throw std::invalid_argument("depth and confidence differ in size");
+      const auto d = depth.masked_select(conf > 0.5f).contiguous();
+      std::vector<float> values(d.data_ptr<float>(), d.data_ptr<float>() + d.numel());
+      double near = 0, far = 0;
+      if (!umvs::depth_range_from_samples(values, &near, &far)) return;
+      std::lock_guard<std::mutex> lock(mutex_);
+      // Never leave the configured bounds: a bad estimate must not shrink the search for good.
+      estimate_near_ = std::max(depth_min_, near);
+      estimate_far_ = std::min(depth_max_, far);
+      have_estimate_range_ = estimate_far_ > estimate_near_ * 1.05;
+    } catch (const std::exception& e) {
+      NODELET_WARN_THROTTLE(10.0, "keyframe_selector: ignoring depth estimate for the depth range: %s", e.what());
+    }
+  }
+
+  void publishPoses(const ros::Time& stamp) {
+    geometry_msgs::PoseArray poses;
+    poses.header.stamp = stamp;
+    poses.header.frame_id = world_frame_;
+    for (const auto& k : buffer_->keyframes()) poses.poses.push_back(frames_by_id_.at(k.id).pose);
+    poses_pub_.publish(poses);
+  }
+
+  std::string world_frame_;
+  double tf_timeout_ = 0.1, depth_min_ = 0.3, depth_max_ = 10.0;
+  bool rectified_ = false, depth_from_estimates_ = true;
+  std::mutex mutex_;
+  std::unique_ptr<umvs::KeyframeBuffer> buffer_;
+  std::map<int64_t, StoredFrame> frames_by_id_;
+  bool have_estimate_range_ = false;
+  double estimate_near_ = 0, estimate_far_ = 0;
+  long frames_ = 0, sets_ = 0;
+
+  std::unique_ptr<tf2_ros::Buffer> tf_buffer_;
+  std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
+  std::unique_ptr<image_transport::ImageTransport> it_;
+  image_transport::SubscriberFilter image_sub_;
+  message_filters::Subscriber<sensor_msgs::CameraInfo> info_sub_;
+  std::unique_ptr<message_filters::Synchronizer<ExactPolicy>> exact_sync_;
+  std::unique_ptr<message_filters::Synchronizer<ApproxPolicy>> approx_sync_;
+  ros::Publisher keyframes_pub_, poses_pub_;
+  ros::Subscriber estimate_sub_;
+};
+
+boost::shared_ptr<nodelet::Nodelet> make_keyframe_selector_nodelet() {
+  return boost::make_shared<KeyframeSelectorNodelet>();
+}
+
+}  // namespace umvs_ros
+
+PLUGINLIB_EXPORT_CLASS(umvs_ros::KeyframeSelectorNodelet, nodelet::Nodelet)

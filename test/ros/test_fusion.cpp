@@ -1,0 +1,170 @@
+// rostest for the fusion node: depth estimates of a plane seen by cameras moving along x become a
+// PointCloud2 on the plane (frame, stamp, fields checked); save_cloud writes a PLY with the same
+// points and never replaces a good file with nothing; reset clears; bad estimates (another world
+// frame, NaN pose, wrong depth encoding) are logged and skipped.
+#include <sensor_msgs/PointCloud2.h>
+#include <sensor_msgs/point_cloud2_iterator.h>
+#include <torch/torch.h>
+
+#include <cmath>
+#include <filesystem>
+
+#include "rostest_util.h"
+#include "unsup_mvs/DepthEstimate.h"
+#include "unsup_mvs/ResetFusion.h"
+#include "unsup_mvs/SaveCloud.h"
+#include "unsup_mvs/io/bag_messages.h"
+#include "unsup_mvs/io/ply.h"
+
+namespace {
+
+using umvs_test::wait_for;
+constexpr int kWidth = 64, kHeight = 48;
+constexpr double kFocal = 50.0, kPlaneZ = 3.0;
+
+// Camera at (x, 0, 0) looking along +z at the plane z = kPlaneZ: depth kPlaneZ everywhere.
+unsup_mvs::DepthEstimate make_estimate(uint32_t id, double x) {
+  unsup_mvs::DepthEstimate e;
+  e.header.stamp = ros::Time::now();
+  e.header.frame_id = "cam";
+  e.keyframe_id = id;
+  e.depth = umvs::float_to_image_msg(torch::full({kHeight, kWidth}, kPlaneZ, torch::kFloat32), e.header);
+  e.confidence = umvs::float_to_image_msg(torch::full({kHeight, kWidth}, 0.9f), e.header);
+  auto color = torch::zeros({kHeight, kWidth, 3}, torch::kUInt8);
+  color.select(2, 0).fill_(200);
+  e.image = umvs::rgb8_to_image_msg(color, e.header);
+  e.camera_info = umvs_test::make_info(kWidth, kHeight, kFocal, e.header);
+  e.world_frame = "world";
+  e.pose = umvs_test::make_pose({x, 0, 0});
+  e.depth_min = 1;
+  e.depth_max = 5;
+  return e;
+}
+
+class FusionTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    estimate_pub_ = nh_.advertise<unsup_mvs::DepthEstimate>("/depth_estimate", 20);
+    cloud_sub_ = nh_.subscribe("/cloud", 5, &FusionTest::onCloud, this);
+    increment_sub_ = nh_.subscribe("/cloud_increment", 20, &FusionTest::onIncrement, this);
+    save_ = nh_.serviceClient<unsup_mvs::SaveCloud>("/fusion/save_cloud");
+    reset_ = nh_.serviceClient<unsup_mvs::ResetFusion>("/fusion/reset");
+    ASSERT_TRUE(save_.waitForExistence(ros::Duration(30.0))) << "fusion did not come up";
+    ASSERT_TRUE(wait_for([&] { return estimate_pub_.getNumSubscribers() > 0 && cloud_sub_.getNumPublishers() > 0 &&
+                                      increment_sub_.getNumPublishers() > 0; }, 10.0));
+    unsup_mvs::ResetFusion r;
+    ASSERT_TRUE(reset_.call(r));
+    dir_ = umvs_test::temp_dir("fusion");
+  }
+  void onCloud(const sensor_msgs::PointCloud2ConstPtr& m) { cloud_ = m; }
+  void onIncrement(const sensor_msgs::PointCloud2ConstPtr& m) {
+    increments_++;
+    increment_points_ += m->width * m->height;
+  }
+
+  unsup_mvs::SaveCloud::Response save(const std::string& path) {
+    unsup_mvs::SaveCloud srv;
+    srv.request.path = path;
+    EXPECT_TRUE(save_.call(srv));
+    return srv.response;
+  }
+
+  ros::NodeHandle nh_;
+  ros::Publisher estimate_pub_;
+  ros::Subscriber cloud_sub_, increment_sub_;
+  ros::ServiceClient save_, reset_;
+  sensor_msgs::PointCloud2ConstPtr cloud_;
+  int increments_ = 0;
+  size_t increment_points_ = 0;
+  std::string dir_;
+};
+
+TEST_F(FusionTest, PlaneBecomesACloudAndIsSaved) {
+  umvs_test::RosoutCapture log(nh_);
+  ros::Time last_stamp;
+  for (uint32_t i = 0; i < 5; ++i) {
+    const auto e = make_estimate(i, 0.1 * i);
+    last_stamp = e.header.stamp;
+    estimate_pub_.publish(e);
+    ros::WallDuration(0.1).sleep();
+  }
+  // min_agreeing_views 2 (see fusion.test): from the third estimate on, pixels are confirmed.
+  ASSERT_TRUE(wait_for([&] { return cloud_ && cloud_->header.stamp == last_stamp; }, 20.0)) << log.all();
+  const auto& c = *cloud_;
+  EXPECT_EQ(c.header.frame_id, "world");
+  ASSERT_GT(c.width * c.height, 1000u);
+  EXPECT_EQ(increment_points_, c.width * c.height) << "the increments add up to the map";
+  std::vector<std::string> names;
+  for (const auto& f : c.fields) names.push_back(f.name);
+  EXPECT_EQ(names, (std::vector<std::string>{"x", "y", "z", "rgb"}));
+  sensor_msgs::PointCloud2ConstIterator<float> x(c, "x"), y(c, "y"), z(c, "z");
+  sensor_msgs::PointCloud2ConstIterator<uint8_t> r(c, "r"), g(c, "g");
+  // Every camera sees x in [cx - 1.9, cx + 1.9], y in [-1.4, 1.4] on the plane (3 m * 31.5 / 50).
+  for (size_t i = 0; i < c.width * c.height; ++i, ++x, ++y, ++z, ++r, ++g) {
+    ASSERT_NEAR(*z, kPlaneZ, 1e-3);
+    ASSERT_TRUE(*x > -2.0f && *x < 2.4f) << *x;
+    ASSERT_TRUE(std::abs(*y) < 1.5f) << *y;
+    ASSERT_EQ(*r, 200);
+    ASSERT_EQ(*g, 0);
+  }
+
+  const std::string path = dir_ + "/cloud.ply";
+  auto res = save(path);
+  ASSERT_TRUE(res.success) << res.message;
+  EXPECT_EQ(res.num_points, c.width * c.height);
+  const umvs::PointCloud saved = umvs::read_ply(path);
+  ASSERT_EQ(saved.size(), res.num_points);
+  for (const auto& p : saved.points) ASSERT_NEAR(p.z(), kPlaneZ, 1e-3);
+
+  // A path that cannot be written: a clear failure.
+  res = save("/nonexistent_folder_umvs/cloud.ply");
+  EXPECT_FALSE(res.success);
+  EXPECT_NE(res.message.find("nonexistent_folder_umvs"), std::string::npos) << res.message;
+
+  // After reset the cloud is empty, and saving it does not replace the good file.
+  const auto size_before = std::filesystem::file_size(path);
+  unsup_mvs::ResetFusion r2;
+  ASSERT_TRUE(reset_.call(r2));
+  EXPECT_TRUE(r2.response.success);
+  res = save(path);
+  EXPECT_FALSE(res.success);
+  EXPECT_EQ(res.num_points, 0u);
+  EXPECT_EQ(std::filesystem::file_size(path), size_before);
+  ASSERT_TRUE(wait_for([&] { return cloud_ && cloud_->width == 0; }, 5.0)) << "the empty map is published after reset";
+}
+
+TEST_F(FusionTest, BadEstimatesAreLoggedAndSkipped) {
+  umvs_test::RosoutCapture log(nh_);
+  auto other_frame = make_estimate(50, 0.0);
+  other_frame.world_frame = "map";
+  estimate_pub_.publish(other_frame);
+  EXPECT_TRUE(log.wait_for("this node fuses in 'world'", 10.0)) << log.all();
+
+  auto nan_pose = make_estimate(51, 0.0);
+  nan_pose.pose.position.z = std::nan("");
+  estimate_pub_.publish(nan_pose);
+  EXPECT_TRUE(log.wait_for("pose has non-finite values", 10.0)) << log.all();
+
+  auto wrong_depth = make_estimate(52, 0.0);
+  wrong_depth.depth.encoding = "mono8";
+  estimate_pub_.publish(wrong_depth);
+  EXPECT_TRUE(log.wait_for("expected a 32FC1 image, got 'mono8'", 10.0)) << log.all();
+
+  // None of them entered the fusion window: three good estimates still make a cloud.
+  for (uint32_t i = 0; i < 3; ++i) {
+    estimate_pub_.publish(make_estimate(60 + i, 0.1 * i));
+    ros::WallDuration(0.1).sleep();
+  }
+  ASSERT_TRUE(wait_for([&] { return cloud_ && cloud_->width > 0; }, 20.0)) << log.all();
+  auto res = save(dir_ + "/after_bad.ply");
+  EXPECT_TRUE(res.success) << res.message;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, "test_fusion");
+  ros::NodeHandle nh;
+  return RUN_ALL_TESTS();
+}

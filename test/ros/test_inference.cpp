@@ -1,0 +1,200 @@
+// rostest for the inference node: lazy subscription, reload_model (refuses a corrupt checkpoint and
+// keeps the old model), DepthEstimate outputs (stamps, frames, sizes, intrinsics, ranges), bad
+// keyframe sets (unsupported encoding, NaN pose, impossible depth range) logged and skipped, and
+// latest-wins when sets arrive faster than the network runs.
+#include <torch/torch.h>
+
+#include <cmath>
+#include <fstream>
+
+#include "rostest_util.h"
+#include "unsup_mvs/DepthEstimate.h"
+#include "unsup_mvs/KeyframeSet.h"
+#include "unsup_mvs/ReloadModel.h"
+#include "unsup_mvs/io/checkpoint.h"
+
+namespace {
+
+using umvs_test::wait_for;
+constexpr int kWidth = 128, kHeight = 96;
+constexpr double kFocal = 100.0;
+
+unsup_mvs::KeyframeSet make_set(uint32_t id) {
+  unsup_mvs::KeyframeSet s;
+  s.header.stamp = ros::Time::now();
+  s.header.frame_id = "world";
+  s.reference_id = id;
+  std_msgs::Header h;
+  h.stamp = s.header.stamp;
+  h.frame_id = "cam";
+  s.reference_image = umvs_test::make_image(kWidth, kHeight, h, 0);
+  s.reference_info = umvs_test::make_info(kWidth, kHeight, kFocal, h);
+  s.reference_pose = umvs_test::make_pose({0, 0, 0});
+  for (int j = 1; j <= 2; ++j) {
+    s.source_ids.push_back(id + j);
+    s.source_images.push_back(umvs_test::make_image(kWidth, kHeight, h, 3 * j));
+    s.source_infos.push_back(umvs_test::make_info(kWidth, kHeight, kFocal, h));
+    s.source_poses.push_back(umvs_test::make_pose({0.1 * j, 0, 0}));
+  }
+  s.depth_min = 1.0f;
+  s.depth_max = 3.0f;
+  return s;
+}
+
+class InferenceTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    dir_ = umvs_test::temp_dir("inference");
+    torch::manual_seed(0);
+    umvs::MvsNet net(umvs::MvsNetConfig{});
+    umvs::save_checkpoint(dir_ + "/model.pt", net);
+    std::ofstream(dir_ + "/corrupt.pt") << "this is not a checkpoint";
+  }
+
+  void SetUp() override {
+    keyframes_pub_ = nh_.advertise<unsup_mvs::KeyframeSet>("/keyframes", 10);
+    reload_ = nh_.serviceClient<unsup_mvs::ReloadModel>("/inference/reload_model");
+    ASSERT_TRUE(reload_.waitForExistence(ros::Duration(30.0))) << "inference did not come up";
+  }
+
+  void subscribe() {
+    estimate_sub_ = nh_.subscribe("/depth_estimate", 10, &InferenceTest::onEstimate, this);
+    depth_sub_ = nh_.subscribe("/depth", 10, &InferenceTest::onDepth, this);
+    ASSERT_TRUE(wait_for([&] { return keyframes_pub_.getNumSubscribers() > 0; }, 10.0));
+  }
+  void onEstimate(const unsup_mvs::DepthEstimateConstPtr& m) { estimates_.push_back(m); }
+  void onDepth(const sensor_msgs::ImageConstPtr& m) { depth_images_.push_back(m); }
+
+  bool reload(const std::string& path, std::string* message) {
+    unsup_mvs::ReloadModel srv;
+    srv.request.checkpoint = path;
+    EXPECT_TRUE(reload_.call(srv));
+    *message = srv.response.message;
+    return srv.response.success;
+  }
+
+  static std::string dir_;
+  ros::NodeHandle nh_;
+  ros::Publisher keyframes_pub_;
+  ros::ServiceClient reload_;
+  ros::Subscriber estimate_sub_, depth_sub_;
+  std::vector<unsup_mvs::DepthEstimateConstPtr> estimates_;
+  std::vector<sensor_msgs::ImageConstPtr> depth_images_;
+};
+std::string InferenceTest::dir_;
+
+TEST_F(InferenceTest, SubscribesLazily) {
+  ros::WallDuration(1.0).sleep();
+  EXPECT_EQ(keyframes_pub_.getNumSubscribers(), 0u) << "keyframes subscribed without anyone listening to the outputs";
+  subscribe();
+  EXPECT_EQ(keyframes_pub_.getNumSubscribers(), 1u);
+  estimate_sub_.shutdown();
+  depth_sub_.shutdown();
+  EXPECT_TRUE(wait_for([&] { return keyframes_pub_.getNumSubscribers() == 0; }, 10.0));
+}
+
+TEST_F(InferenceTest, ReloadAndDepthEstimates) {
+  umvs_test::RosoutCapture log(nh_);
+  subscribe();
+  // Started without a checkpoint: sets are refused with a clear message until a model is loaded.
+  keyframes_pub_.publish(make_set(1));
+  EXPECT_TRUE(log.wait_for("no model loaded", 10.0)) << log.all();
+
+  std::string message;
+  EXPECT_FALSE(reload(dir_ + "/corrupt.pt", &message));
+  EXPECT_NE(message.find("corrupt.pt"), std::string::npos) << message;
+  EXPECT_FALSE(reload(dir_ + "/missing.pt", &message));
+  EXPECT_NE(message.find("missing.pt"), std::string::npos) << message;
+  ASSERT_TRUE(reload(dir_ + "/model.pt", &message)) << message;
+
+  const auto set = make_set(7);
+  keyframes_pub_.publish(set);
+  ASSERT_TRUE(wait_for([&] { return !estimates_.empty() && !depth_images_.empty(); }, 60.0)) << log.all();
+  const auto& e = *estimates_.front();
+  EXPECT_EQ(e.keyframe_id, 7u);
+  EXPECT_EQ(e.header.stamp, set.header.stamp);
+  EXPECT_EQ(e.header.frame_id, "cam");
+  EXPECT_EQ(e.world_frame, "world");
+  EXPECT_EQ(e.depth.encoding, "32FC1");
+  EXPECT_EQ(e.confidence.encoding, "32FC1");
+  EXPECT_EQ(e.image.encoding, "rgb8");
+  // 128x96 is a multiple of 32: no resize, the depth map is a quarter of it.
+  EXPECT_EQ(e.depth.width, kWidth / 4u);
+  EXPECT_EQ(e.depth.height, kHeight / 4u);
+  EXPECT_EQ(e.camera_info.width, kWidth / 4u);
+  EXPECT_NEAR(e.camera_info.K[0], kFocal / 4, 1e-9);
+  EXPECT_NEAR(e.pose.position.x, 0.0, 1e-12);
+  EXPECT_FLOAT_EQ(e.depth_min, 1.0f);
+  EXPECT_FLOAT_EQ(e.depth_max, 3.0f);
+  EXPECT_GT(e.inference_seconds, 0.0f);
+  const float* d = reinterpret_cast<const float*>(e.depth.data.data());
+  const float* c = reinterpret_cast<const float*>(e.confidence.data.data());
+  for (size_t i = 0; i < e.depth.width * e.depth.height; ++i) {
+    // Soft-argmin over planes in [1, 3] stays inside the range even with random weights.
+    ASSERT_TRUE(d[i] >= 1.0f - 1e-4f && d[i] <= 3.0f + 1e-4f) << d[i];
+    ASSERT_TRUE(c[i] >= 0.0f && c[i] <= 1.0f + 1e-5f) << c[i];
+  }
+  EXPECT_EQ(depth_images_.front()->header.stamp, set.header.stamp);
+
+  // A corrupt checkpoint later keeps the model that works.
+  EXPECT_FALSE(reload(dir_ + "/corrupt.pt", &message));
+  estimates_.clear();
+  keyframes_pub_.publish(make_set(8));
+  ASSERT_TRUE(wait_for([&] { return !estimates_.empty(); }, 60.0)) << log.all();
+  EXPECT_EQ(estimates_.front()->keyframe_id, 8u);
+}
+
+TEST_F(InferenceTest, BadSetsAreLoggedAndSkipped) {
+  umvs_test::RosoutCapture log(nh_);
+  subscribe();
+  std::string message;
+  ASSERT_TRUE(reload(dir_ + "/model.pt", &message)) << message;
+
+  auto wrong_encoding = make_set(20);
+  wrong_encoding.reference_image.encoding = "32FC1";
+  wrong_encoding.reference_image.step = kWidth * 4;
+  wrong_encoding.reference_image.data.resize(kWidth * 4 * kHeight);
+  keyframes_pub_.publish(wrong_encoding);
+  EXPECT_TRUE(log.wait_for("unsupported image encoding '32FC1'", 10.0)) << log.all();
+
+  auto nan_pose = make_set(21);
+  nan_pose.source_poses[1].orientation.w = std::nan("");
+  keyframes_pub_.publish(nan_pose);
+  EXPECT_TRUE(log.wait_for("pose has non-finite values", 10.0)) << log.all();
+
+  auto bad_range = make_set(22);
+  bad_range.depth_min = 3.0f;
+  bad_range.depth_max = 1.0f;
+  keyframes_pub_.publish(bad_range);
+  EXPECT_TRUE(log.wait_for("impossible depth range", 10.0)) << log.all();
+
+  ros::WallDuration(0.5).sleep();
+  ros::spinOnce();
+  EXPECT_TRUE(estimates_.empty());
+  keyframes_pub_.publish(make_set(23));
+  ASSERT_TRUE(wait_for([&] { return !estimates_.empty(); }, 60.0)) << log.all();
+  EXPECT_EQ(estimates_.front()->keyframe_id, 23u);
+}
+
+TEST_F(InferenceTest, LatestSetWinsWhenBusy) {
+  subscribe();
+  std::string message;
+  ASSERT_TRUE(reload(dir_ + "/model.pt", &message)) << message;
+  // Six sets at once: the network takes far longer than publishing, so the stale ones are dropped
+  // and the newest one is processed.
+  for (uint32_t id = 100; id < 106; ++id) keyframes_pub_.publish(make_set(id));
+  ASSERT_TRUE(wait_for([&] { return !estimates_.empty() && estimates_.back()->keyframe_id == 105; }, 60.0));
+  ros::WallDuration(1.0).sleep();
+  ros::spinOnce();
+  EXPECT_LE(estimates_.size(), 2u);
+  EXPECT_EQ(estimates_.back()->keyframe_id, 105u);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, "test_inference");
+  ros::NodeHandle nh;
+  return RUN_ALL_TESTS();
+}

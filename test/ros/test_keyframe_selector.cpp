@@ -1,0 +1,146 @@
+// rostest for keyframe_selector: a camera moving along x (tf2 + Image + CameraInfo) gives
+// KeyframeSets with the right stamps, frames, neighbours and depth range; bad input (unsupported
+// encoding, missing transform, NaN pose, distorted calibration) is logged and skipped, and the
+// node keeps working.
+#include <tf2_msgs/TFMessage.h>
+
+#include <cmath>
+
+#include "rostest_util.h"
+#include "unsup_mvs/KeyframeSet.h"
+
+namespace {
+
+using umvs_test::wait_for;
+
+class KeyframeSelectorTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    image_pub_ = nh_.advertise<sensor_msgs::Image>("/cam/image", 10);
+    info_pub_ = nh_.advertise<sensor_msgs::CameraInfo>("/cam/camera_info", 10);
+    tf_pub_ = nh_.advertise<tf2_msgs::TFMessage>("/tf", 100);
+    sets_sub_ = nh_.subscribe("/keyframes", 20, &KeyframeSelectorTest::onSet, this);
+    ASSERT_TRUE(wait_for([&] { return image_pub_.getNumSubscribers() > 0 && info_pub_.getNumSubscribers() > 0 &&
+                                      tf_pub_.getNumSubscribers() > 0 && sets_sub_.getNumPublishers() > 0; }, 30.0))
+        << "keyframe_selector did not come up";
+  }
+  void onSet(const unsup_mvs::KeyframeSetConstPtr& m) { sets_.push_back(m); }
+
+  // One frame: the transform world -> frame at `stamp`, then image + camera_info.
+  void sendFrame(const geometry_msgs::Pose& pose, const std::string& frame = "cam", const std::string& encoding = "rgb8",
+                 bool distorted = false) {
+    const ros::Time stamp = ros::Time::now();
+    geometry_msgs::TransformStamped tf;
+    tf.header.stamp = stamp;
+    tf.header.frame_id = "world";
+    tf.child_frame_id = frame;
+    tf.transform.translation.x = pose.position.x;
+    tf.transform.translation.y = pose.position.y;
+    tf.transform.translation.z = pose.position.z;
+    tf.transform.rotation = pose.orientation;
+    tf2_msgs::TFMessage tfm;
+    tfm.transforms.push_back(tf);
+    tf_pub_.publish(tfm);
+    ros::WallDuration(0.03).sleep();
+    std_msgs::Header header;
+    header.stamp = stamp;
+    header.frame_id = frame;
+    auto info = umvs_test::make_info(160, 128, 120.0, header);
+    if (distorted) info.D[0] = -0.2;
+    info_pub_.publish(info);
+    image_pub_.publish(umvs_test::make_image(160, 128, header, 0, encoding));
+    stamps_.push_back(stamp);
+    ros::WallDuration(0.05).sleep();
+    ros::spinOnce();
+  }
+
+  ros::NodeHandle nh_;
+  ros::Publisher image_pub_, info_pub_, tf_pub_;
+  ros::Subscriber sets_sub_;
+  std::vector<unsup_mvs::KeyframeSetConstPtr> sets_;
+  std::vector<ros::Time> stamps_;
+};
+
+TEST_F(KeyframeSelectorTest, KeyframeSetsFromAMovingCamera) {
+  umvs_test::RosoutCapture log(nh_);
+  // 0.05 m per frame with a 0.1 m threshold: frames 0, 2, 4, ... are keyframes; the first set
+  // needs two earlier keyframes, so keyframes 2..5 (frames 4, 6, 8, 10) give sets.
+  for (int i = 0; i < 12; ++i) sendFrame(umvs_test::make_pose({0.05 * i, 0, 0}));
+  ASSERT_TRUE(wait_for([&] { return sets_.size() >= 4; }, 10.0)) << "got " << sets_.size() << " sets";
+  ros::WallDuration(0.5).sleep();
+  ros::spinOnce();
+  ASSERT_EQ(sets_.size(), 4u);
+  for (size_t k = 0; k < sets_.size(); ++k) {
+    const auto& s = *sets_[k];
+    SCOPED_TRACE("set " + std::to_string(k));
+    EXPECT_EQ(s.reference_id, k + 2);
+    EXPECT_EQ(s.header.frame_id, "world");
+    EXPECT_EQ(s.header.stamp, stamps_[2 * (k + 2)]);
+    EXPECT_EQ(s.reference_image.header.stamp, s.header.stamp);
+    EXPECT_EQ(s.reference_image.header.frame_id, "cam");
+    EXPECT_EQ(s.reference_info.width, 160u);
+    EXPECT_NEAR(s.reference_pose.position.x, 0.1 * (k + 2), 1e-9);
+    ASSERT_EQ(s.source_ids.size(), 2u);
+    ASSERT_EQ(s.source_images.size(), 2u);
+    ASSERT_EQ(s.source_infos.size(), 2u);
+    ASSERT_EQ(s.source_poses.size(), 2u);
+    for (size_t j = 0; j < 2; ++j) {
+      EXPECT_LT(s.source_ids[j], s.reference_id);
+      // The pose sent with a source is the pose of that keyframe.
+      EXPECT_NEAR(s.source_poses[j].position.x, 0.1 * s.source_ids[j], 1e-9);
+      EXPECT_EQ(s.source_images[j].header.stamp, stamps_[2 * s.source_ids[j]]);
+    }
+    EXPECT_NE(s.source_ids[0], s.source_ids[1]);
+    EXPECT_FLOAT_EQ(s.depth_min, 1.0f);
+    EXPECT_FLOAT_EQ(s.depth_max, 4.0f);
+  }
+  // The last reference (x = 0.5) has keyframes 0..4 at 0.5..0.1 m: at 2.5 m depth the nearest
+  // one triangulates at 2.3 degrees, far from the score's 5 degree optimum, so it is not chosen.
+  const auto& last = *sets_.back();
+  EXPECT_NE(last.source_ids[0], 4u);
+  EXPECT_NE(last.source_ids[1], 4u);
+  EXPECT_FALSE(log.contains("keyframe_selector:")) << log.all();
+}
+
+TEST_F(KeyframeSelectorTest, BadInputIsLoggedAndSkipped) {
+  umvs_test::RosoutCapture log(nh_);
+  ros::WallDuration(0.3).sleep();
+  // Far from the previous test's keyframes, so every good frame here is a keyframe.
+  sendFrame(umvs_test::make_pose({5.0, 0, 0}), "cam", "32FC1");
+  EXPECT_TRUE(log.wait_for("image encoding '32FC1' is not supported", 5.0)) << log.all();
+
+  sendFrame(umvs_test::make_pose({5.0, 0, 0}), "cam", "rgb8", /*distorted=*/true);
+  EXPECT_TRUE(log.wait_for("non-zero distortion coefficients", 5.0)) << log.all();
+
+  // A camera frame nobody publishes a transform for.
+  {
+    const ros::Time stamp = ros::Time::now();
+    std_msgs::Header header;
+    header.stamp = stamp;
+    header.frame_id = "cam_without_tf";
+    info_pub_.publish(umvs_test::make_info(160, 128, 120.0, header));
+    image_pub_.publish(umvs_test::make_image(160, 128, header));
+  }
+  EXPECT_TRUE(log.wait_for("no transform world -> 'cam_without_tf'", 5.0)) << log.all();
+
+  // A NaN pose: tf2 refuses to store it, so the node sees no pose for that frame and skips it.
+  geometry_msgs::Pose nan_pose = umvs_test::make_pose({5.0, 0, 0});
+  nan_pose.position.y = std::nan("");
+  sendFrame(nan_pose, "cam_nan");
+  EXPECT_TRUE(log.wait_for("'cam_nan'", 5.0)) << log.all();
+
+  // Still working: three good keyframes give a set (the bad frames added no keyframes).
+  const size_t before = sets_.size();
+  for (int i = 0; i < 3; ++i) sendFrame(umvs_test::make_pose({5.0 + 0.15 * i, 0, 0}));
+  ASSERT_TRUE(wait_for([&] { return sets_.size() > before; }, 10.0)) << log.all();
+  EXPECT_NEAR(sets_.back()->reference_pose.position.x, 5.3, 1e-9);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, "test_keyframe_selector");
+  ros::NodeHandle nh;
+  return RUN_ALL_TESTS();
+}

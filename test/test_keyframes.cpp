@@ -1,0 +1,152 @@
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "unsup_mvs/core/keyframes.h"
+
+namespace umvs {
+namespace {
+
+// A 160x128 camera at `center` looking along +z of the world (identity rotation) or turned by
+// `yaw_deg` about the camera's y axis.
+Camera camera_at(const Eigen::Vector3d& center, double yaw_deg = 0.0) {
+  Camera c;
+  c.width = 160;
+  c.height = 128;
+  c.K << 120, 0, 79.5, 0, 120, 63.5, 0, 0, 1;
+  const Eigen::Matrix3d R_world_cam = Eigen::AngleAxisd(yaw_deg * M_PI / 180.0, Eigen::Vector3d::UnitY()).toRotationMatrix();
+  Eigen::Matrix4d T_world_cam = Eigen::Matrix4d::Identity();
+  T_world_cam.topLeftCorner<3, 3>() = R_world_cam;
+  T_world_cam.topRightCorner<3, 1>() = center;
+  c.T_cam_world = T_world_cam.inverse();
+  return c;
+}
+
+TEST(Keyframes, PoseDistanceMatchesDefinition) {
+  const PoseDistance same = pose_distance(camera_at({1, 2, 3}, 20), camera_at({1, 2, 3}, 20));
+  EXPECT_NEAR(same.translation, 0.0, 1e-12);
+  EXPECT_NEAR(same.rotation_deg, 0.0, 1e-6);
+  EXPECT_NEAR(same.combined, 0.0, 1e-6);
+
+  const PoseDistance moved = pose_distance(camera_at({0, 0, 0}), camera_at({0.3, 0.4, 0}));
+  EXPECT_NEAR(moved.translation, 0.5, 1e-12);
+  EXPECT_NEAR(moved.rotation_deg, 0.0, 1e-6);
+  EXPECT_NEAR(moved.combined, 0.5, 1e-9);
+
+  // A pure rotation by 30 degrees: trace(R) = 1 + 2 cos(30deg).
+  const PoseDistance turned = pose_distance(camera_at({0, 0, 0}), camera_at({0, 0, 0}, 30));
+  EXPECT_NEAR(turned.translation, 0.0, 1e-12);
+  EXPECT_NEAR(turned.rotation_deg, 30.0, 1e-9);
+  EXPECT_NEAR(turned.combined, std::sqrt(2.0 / 3.0 * (2.0 - 2.0 * std::cos(M_PI / 6))), 1e-9);
+}
+
+TEST(Keyframes, NewKeyframeOnlyAfterEnoughMotion) {
+  KeyframeConfig cfg;
+  cfg.min_translation = 0.1;
+  cfg.min_rotation_deg = 10.0;
+  KeyframeBuffer buffer(cfg);
+  EXPECT_TRUE(buffer.is_keyframe(camera_at({0, 0, 0})));
+  buffer.add(camera_at({0, 0, 0}), 0.0);
+  EXPECT_FALSE(buffer.is_keyframe(camera_at({0.05, 0, 0})));
+  EXPECT_FALSE(buffer.is_keyframe(camera_at({0, 0, 0}, 5)));
+  EXPECT_TRUE(buffer.is_keyframe(camera_at({0.1, 0, 0})));
+  EXPECT_TRUE(buffer.is_keyframe(camera_at({0, 0, 0}, 11)));
+
+  // The combined distance alone: 0.08 m and 6 degrees are each below their thresholds but
+  // sqrt(0.08^2 + 2/3 * (2 - 2 cos 6deg)) = 0.117 is above 0.1.
+  cfg.min_translation = 0;
+  cfg.min_rotation_deg = 0;
+  cfg.min_pose_distance = 0.1;
+  KeyframeBuffer combined(cfg);
+  combined.add(camera_at({0, 0, 0}), 0.0);
+  EXPECT_FALSE(combined.is_keyframe(camera_at({0.08, 0, 0})));
+  EXPECT_TRUE(combined.is_keyframe(camera_at({0.08, 0, 0}, 6)));
+}
+
+TEST(Keyframes, BufferIsBoundedAndEvictsTheOldest) {
+  KeyframeConfig cfg;
+  cfg.buffer_size = 4;
+  KeyframeBuffer buffer(cfg);
+  int64_t evicted = 0;
+  for (int i = 0; i < 6; ++i) {
+    const Keyframe& k = buffer.add(camera_at({0.2 * i, 0, 0}), i, &evicted);
+    EXPECT_EQ(k.id, i);
+    EXPECT_EQ(evicted, i < 4 ? -1 : i - 4);
+  }
+  EXPECT_EQ(buffer.keyframes().size(), 4u);
+  EXPECT_EQ(buffer.keyframes().front().id, 2);
+  EXPECT_EQ(buffer.find(1), nullptr);
+  ASSERT_NE(buffer.find(5), nullptr);
+  EXPECT_DOUBLE_EQ(buffer.find(5)->stamp, 5.0);
+}
+
+TEST(Keyframes, NeighboursAreTheBestTriangulatingViews) {
+  // Reference at the origin looking at a surface 2 m away. The view-selection score peaks at a
+  // 5 degree triangulation angle: a baseline of ~0.175 m at 2 m. Candidates: 0.02 m (angle too
+  // small), 0.17 m and -0.18 m (both near optimal), 1.5 m (too wide), and one turned away.
+  KeyframeConfig cfg;
+  cfg.min_translation = 0.01;
+  KeyframeBuffer buffer(cfg);
+  buffer.add(camera_at({0.02, 0, 0}), 0);    // id 0
+  buffer.add(camera_at({1.5, 0, 0}), 1);     // id 1
+  buffer.add(camera_at({0.17, 0, 0}), 2);    // id 2
+  buffer.add(camera_at({0, 0, 0}, 180), 3);  // id 3: sees nothing of the reference's surface
+  buffer.add(camera_at({-0.18, 0, 0}), 4);   // id 4
+  const Keyframe& ref = buffer.add(camera_at({0, 0, 0}), 5);
+  const auto best = buffer.select_sources(ref.id, 2.0);
+  ASSERT_EQ(best.size(), 2u);
+  EXPECT_TRUE((best[0].id == 2 && best[1].id == 4) || (best[0].id == 4 && best[1].id == 2))
+      << best[0].id << ", " << best[1].id;
+  EXPECT_GE(best[0].score, best[1].score);
+
+  // With only poor candidates, fewer neighbours than asked are returned.
+  KeyframeConfig strict = cfg;
+  strict.min_score = 100.0;  // out of 256 sampled points
+  KeyframeBuffer poor(strict);
+  poor.add(camera_at({0.02, 0, 0}), 0);
+  poor.add(camera_at({0, 0, 0}, 180), 1);
+  const Keyframe& r = poor.add(camera_at({0, 0, 0}), 2);
+  EXPECT_TRUE(poor.select_sources(r.id, 2.0).empty());
+  EXPECT_THROW(poor.select_sources(99, 2.0), std::invalid_argument);
+}
+
+TEST(Keyframes, OfflineSelectionOnATrajectory) {
+  // 1.01 cm per frame along x: with a 10 cm threshold every 10th frame is a keyframe.
+  std::vector<Camera> traj;
+  for (int i = 0; i < 50; ++i) traj.push_back(camera_at({0.0101 * i, 0, 0}));
+  const auto chosen = select_keyframes(traj);
+  ASSERT_EQ(chosen.size(), 5u);
+  for (size_t k = 0; k < chosen.size(); ++k) EXPECT_EQ(chosen[k], 10 * k);
+}
+
+TEST(Keyframes, InvalidConfigAndCameraAreRefused) {
+  KeyframeConfig cfg;
+  cfg.buffer_size = 2;  // needs num_sources + 1 = 3
+  EXPECT_THROW(KeyframeBuffer{cfg}, std::invalid_argument);
+  cfg = {};
+  cfg.min_translation = cfg.min_rotation_deg = cfg.min_pose_distance = 0;
+  EXPECT_THROW(KeyframeBuffer{cfg}, std::invalid_argument);
+  KeyframeBuffer buffer;
+  Camera bad = camera_at({0, 0, 0});
+  bad.T_cam_world(0, 3) = std::nan("");
+  EXPECT_THROW(buffer.add(bad, 0), std::invalid_argument);
+  EXPECT_TRUE(buffer.keyframes().empty());
+}
+
+TEST(Keyframes, DepthRangeFromSamples) {
+  std::vector<float> d;
+  for (int i = 0; i <= 1000; ++i) d.push_back(1.0f + 0.003f * i);  // 1 .. 4 m
+  d.push_back(std::nanf(""));
+  d.push_back(-1.0f);
+  double near = 0, far = 0;
+  ASSERT_TRUE(depth_range_from_samples(d, &near, &far, 0.0, 1.0, 0.0));
+  EXPECT_NEAR(near, 1.0, 1e-6);
+  EXPECT_NEAR(far, 4.0, 1e-5);
+  ASSERT_TRUE(depth_range_from_samples(d, &near, &far, 0.1, 0.9, 0.25));
+  EXPECT_NEAR(near, 1.3 / 1.25, 1e-3);
+  EXPECT_NEAR(far, 3.7 * 1.25, 1e-3);
+  EXPECT_FALSE(depth_range_from_samples({1.0f, 2.0f}, &near, &far));
+}
+
+}  // namespace
+}  // namespace umvs
