@@ -1,0 +1,100 @@
+// The unsupervised multi-view loss of Khot et al. 2019 ("Learning Unsupervised Multi-View
+// Stereopsis via Robust Photometric Consistency"): source views are inverse-warped into the
+// reference with the predicted depth (geometry.h: inverse_warp, gradients flow into depth) and
+// compared with the reference per pixel and view.
+//
+//   naive photometric (eq. 3):  mean_c |I - I'|
+//   first-order (eq. 4):        mean_c huber(I - I') + mean_c (|dx I - dx I'| + |dy I - dy I'|)
+//   robust aggregation (eq. 5): per pixel keep the K smallest of the M view losses (invalid
+//                               entries count as a large value), average over the valid kept ones
+//   SSIM:                       (1 - SSIM)/2 clipped to [0,1] on the 2 best-ranked loss views
+//                               (the first two, in view-selection order), 3x3 average pooling
+//   smoothness:                 |dx D| exp(-mean_c |dx I|) + |dy D| exp(-mean_c |dy I|)
+//   total = alpha * photometric + beta * SSIM + gamma * smoothness
+//
+// All maps live on one pixel grid (the caller decides which: `umvs train` uses the network's
+// 1/4-resolution depth grid, see docs/training.md). Masks are float {0,1}.
+#pragma once
+
+#include <torch/types.h>
+
+#include <string>
+
+namespace umvs {
+
+enum class PhotometricTerm {
+  kNaive,       // L1 on colour (eq. 3)
+  kFirstOrder,  // Huber on colour + L1 (or Huber) on image gradients (eq. 4)
+};
+const char* to_string(PhotometricTerm t);
+
+struct LossConfig {
+  PhotometricTerm term = PhotometricTerm::kFirstOrder;
+  // Views kept per pixel by the robust aggregation; 0 (or >= M) keeps all views.
+  int top_k = 3;
+  // Huber threshold on the colour difference (colours in [0,1]); the gradient term is L1 when
+  // huber_delta_gradient is 0. The paper does not state its threshold; 0.1 keeps the quadratic
+  // zone below ~25 grey levels.
+  double huber_delta_intensity = 0.1;
+  double huber_delta_gradient = 0.0;
+  // Entries of invalid (out-of-image) pixels before the top-K selection.
+  double invalid_value = 1e4;
+  // Loss views used by the SSIM term (the first ones in view-selection order).
+  int ssim_views = 2;
+  // Normalise every image (each view separately) to zero mean, unit std before comparing (the
+  // authors' released code); the smoothness edge weights then see normalised gradients too.
+  bool normalize_images = false;
+  double alpha = 0.8;      // photometric
+  double beta = 0.2;       // SSIM
+  double gamma = 0.0067;   // smoothness (on depth divided by its mean: scale-free)
+
+  // The paper's weights (the defaults above).
+  static LossConfig paper();
+  // The authors' released code: 12 / 6 / 0.18, Huber 0.6 on colour and 0.2 on gradients,
+  // per-image normalised inputs.
+  static LossConfig authors_code();
+  // Throws std::invalid_argument naming the field.
+  void validate() const;
+  std::string to_string() const;
+};
+
+// Per-pixel, per-view photometric loss of one warped view.
+//   ref, warped [B,C,H,W]; valid [B,1,H,W]  -> loss [B,H,W], valid [B,H,W] (pixels where every
+//   value the loss reads is valid: the gradient term also needs the right and lower neighbour)
+struct LossMap {
+  torch::Tensor loss;
+  torch::Tensor valid;
+};
+LossMap photometric_loss_map(const torch::Tensor& ref, const torch::Tensor& warped, const torch::Tensor& valid,
+                             const LossConfig& config);
+
+// Robust aggregation (eq. 5): losses, valid [B,M,H,W]; top_k in 1..M (0 = M).
+// Returns sum of the kept valid entries / their number (0 when none is valid).  -> scalar
+torch::Tensor top_k_aggregate(const torch::Tensor& losses, const torch::Tensor& valid, int top_k,
+                              double invalid_value = 1e4);
+
+// Mean of the masked (1 - SSIM)/2 map.  ref, warped [B,C,H,W]; valid [B,1,H,W]  -> scalar
+torch::Tensor ssim_loss(const torch::Tensor& ref, const torch::Tensor& warped, const torch::Tensor& valid);
+
+// Edge-aware smoothness of depth [B,H,W] given the reference image [B,C,H,W]  -> scalar.
+// Depth is divided by its per-image mean first, so the weight does not depend on scene units.
+torch::Tensor smoothness_loss(const torch::Tensor& depth, const torch::Tensor& image);
+
+struct LossTerms {
+  torch::Tensor total;        // scalar, differentiable
+  torch::Tensor photometric;  // scalar (after top-K)
+  torch::Tensor ssim;         // scalar
+  torch::Tensor smoothness;   // scalar
+  torch::Tensor valid_fraction;  // scalar: fraction of (pixel, kept view) entries that were valid
+};
+
+// The full loss.
+//   ref_image [B,3,H,W]; src_images [B,M,3,H,W] (colours in [0,1])
+//   K_ref [B,3,3]; K_src [B,M,3,3]; T_src_ref [B,M,4,4] (source-from-reference)
+//   depth [B,H,W] (> 0, same grid as the images)
+LossTerms unsupervised_loss(const torch::Tensor& ref_image, const torch::Tensor& src_images,
+                            const torch::Tensor& K_ref, const torch::Tensor& K_src,
+                            const torch::Tensor& T_src_ref, const torch::Tensor& depth,
+                            const LossConfig& config);
+
+}  // namespace umvs

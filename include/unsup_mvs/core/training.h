@@ -1,0 +1,132 @@
+// Unsupervised training of MVSNet with the robust photometric loss (losses.h), independent of
+// where the images come from: a data source (io/training_data.h: MVSNet folders; later rosbags)
+// produces TrainingTuples, the Trainer turns them into batches and optimises.
+//
+// Where the loss is computed: on the network's depth grid (1/4 of the input), where depth pixel
+// (i, j) sits on input pixel (4i, 4j) (depth_map_camera). Every loss image is box-filtered over
+// 5x5 input pixels centred on (4i, 4j) and sampled there, so images, depth and intrinsics agree
+// exactly; this keeps the loss as cheap as the network's output (see docs/training.md).
+#pragma once
+
+#include <torch/nn/module.h>
+#include <torch/optim/adam.h>
+#include <torch/types.h>
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "unsup_mvs/core/depth_estimator.h"
+#include "unsup_mvs/core/losses.h"
+#include "unsup_mvs/core/mvsnet.h"
+
+namespace umvs {
+
+// One training example. All images have the network input size (multiples of 32, the same for
+// every view), cameras match their image.
+struct TrainingTuple {
+  std::vector<ViewInput> network_views;  // [0] reference, then the N-1 network source views
+  std::vector<ViewInput> loss_views;     // M views warped into the reference by the loss
+  double depth_min = 0.0, depth_max = 0.0;
+  torch::Tensor depth_gt;                // optional float32 [H,W] on the input grid, 0 = unknown
+  std::string name;                      // for messages, e.g. "scan1/view 12"
+
+  // Throws std::invalid_argument naming the tuple and the problem.
+  void validate() const;
+};
+
+// Tensors of a batch of tuples (same sizes and counts), on the device.
+struct TrainingBatch {
+  torch::Tensor images;        // [B,N,3,H,W] in [0,1]
+  torch::Tensor proj;          // [B,N,4,4] mvsnet_projection_matrices
+  torch::Tensor depth_values;  // [B,D]
+  torch::Tensor loss_ref;      // [B,3,h,w] reference on the depth grid (h = H/4)
+  torch::Tensor loss_src;      // [B,M,3,h,w]
+  torch::Tensor K_ref;         // [B,3,3] depth-grid intrinsics
+  torch::Tensor K_src;         // [B,M,3,3]
+  torch::Tensor T_src_ref;     // [B,M,4,4]
+  torch::Tensor depth_gt;      // [B,h,w] (0 = unknown) or undefined when no tuple has GT
+};
+TrainingBatch make_training_batch(const std::vector<TrainingTuple>& tuples, int num_depth, DepthSampling sampling,
+                                  const torch::Device& device);
+
+// Box filter over the 5x5 input pixels centred on (4i, 4j), sampled there: the image on the
+// network's depth grid.  [B,C,H,W] -> [B,C,H/4,W/4]
+torch::Tensor downsample_to_depth_grid(const torch::Tensor& image);
+
+// Depth errors on the pixels with ground truth (> 0).  est, gt [B,h,w]
+struct DepthErrors {
+  double mean_abs = 0.0;    // mean |est - gt| (scene units)
+  double median_abs = 0.0;
+  double abs_rel = 0.0;     // mean |est - gt| / gt (scale-free)
+  double within_1pct = 0.0; // fraction with |est - gt| <= 1% of gt
+  int64_t pixels = 0;
+};
+DepthErrors depth_errors(const torch::Tensor& est, const torch::Tensor& gt);
+
+struct TrainerConfig {
+  LossConfig loss;
+  int num_depth = 128;      // hypotheses per depth map during training (multiple of 8)
+  double lr = 1e-3;         // Adam
+  double beta1 = 0.95;
+  double beta2 = 0.999;
+  void validate() const;
+};
+
+// Scalar results of one step or evaluation (averages over the batches).
+struct LossValues {
+  double total = 0, photometric = 0, ssim = 0, smoothness = 0, valid_fraction = 0;
+  int count = 0;
+  void add(const LossTerms& t);
+  LossValues mean() const;
+};
+
+struct Evaluation {
+  LossValues loss;              // photometric terms on the evaluated tuples
+  DepthErrors depth;            // when the tuples have ground truth (depth.pixels > 0)
+  int tuples = 0;
+};
+
+class Trainer {
+ public:
+  Trainer(MvsNet model, torch::Device device, TrainerConfig config);
+
+  // One Adam step on a batch of tuples (the model in train mode).
+  LossValues step(const std::vector<TrainingTuple>& batch);
+  // Loss (and depth errors when ground truth is present) without gradients, in eval mode; the
+  // model is put back in train mode afterwards.
+  Evaluation evaluate(const std::vector<TrainingTuple>& tuples);
+
+  // Adam state as bytes (torch::serialize::OutputArchive), for CheckpointMeta::optimizer_state.
+  std::string optimizer_state() const;
+  void load_optimizer_state(const std::string& bytes);
+
+  MvsNet& model() { return model_; }
+  const TrainerConfig& config() const { return config_; }
+
+ private:
+  MvsNet model_;
+  torch::Device device_;
+  TrainerConfig config_;
+  std::unique_ptr<torch::optim::Adam> optimizer_;
+};
+
+// The loss of `model` on `tuples` (eval mode, no gradients): the held-out photometric loss a
+// service compares between a new and the served model, and GT depth errors where available.
+Evaluation evaluate_model(MvsNet& model, const std::vector<TrainingTuple>& tuples, const TrainerConfig& config,
+                          const torch::Device& device);
+
+// LibTorch's default CPU generator state as bytes and back (exact resume).
+std::string torch_rng_state();
+void set_torch_rng_state(const std::string& bytes);
+
+// A loss-curve picture: each series is drawn as a polyline over the step range on a log10 y
+// axis, with a light grid at powers of ten and the y range written at the left edge.
+//   -> uint8 [height,width,3]
+struct CurveSeries {
+  std::vector<double> x, y;
+  uint8_t r = 0, g = 0, b = 0;
+};
+torch::Tensor render_curves(const std::vector<CurveSeries>& series, int width = 800, int height = 400);
+
+}  // namespace umvs

@@ -1,0 +1,331 @@
+#include "unsup_mvs/core/training.h"
+
+#include <ATen/CPUGeneratorImpl.h>
+#include <torch/torch.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <mutex>
+#include <sstream>
+#include <stdexcept>
+
+#include "unsup_mvs/core/geometry.h"
+#include "unsup_mvs/core/image_ops.h"
+
+namespace umvs {
+
+namespace F = torch::nn::functional;
+
+void TrainingTuple::validate() const {
+  auto bad = [&](const std::string& what) { throw std::invalid_argument("training tuple " + name + ": " + what); };
+  if (network_views.size() < 2) bad("needs a reference and at least one network source view");
+  if (loss_views.empty()) bad("needs at least one loss view");
+  if (!(depth_min > 0) || !(depth_max > depth_min) || !std::isfinite(depth_max)) {
+    bad("impossible depth range [" + std::to_string(depth_min) + ", " + std::to_string(depth_max) + "]");
+  }
+  const auto& ref = network_views.front().camera;
+  if (ref.width % 32 != 0 || ref.height % 32 != 0) bad("image size must be a multiple of 32");
+  auto check = [&](const ViewInput& v, const std::string& what) {
+    v.camera.validate(name + " " + what);
+    if (!v.image.defined() || v.image.dim() != 3 || v.image.size(2) != 3 || v.image.scalar_type() != torch::kUInt8) {
+      bad(what + ": image must be uint8 [H,W,3]");
+    }
+    if (v.image.size(0) != ref.height || v.image.size(1) != ref.width || v.camera.width != ref.width ||
+        v.camera.height != ref.height) {
+      bad(what + ": image or camera size differs from the reference's " + std::to_string(ref.width) + "x" +
+          std::to_string(ref.height));
+    }
+  };
+  for (size_t i = 0; i < network_views.size(); ++i) check(network_views[i], "network view " + std::to_string(i));
+  for (size_t i = 0; i < loss_views.size(); ++i) check(loss_views[i], "loss view " + std::to_string(i));
+  if (depth_gt.defined() && (depth_gt.dim() != 2 || depth_gt.size(0) != ref.height || depth_gt.size(1) != ref.width)) {
+    bad("ground-truth depth must be [H,W] like the reference image");
+  }
+}
+
+torch::Tensor downsample_to_depth_grid(const torch::Tensor& image) {
+  return F::avg_pool2d(image, F::AvgPool2dFuncOptions(5).stride(4).padding(2).count_include_pad(false));
+}
+
+TrainingBatch make_training_batch(const std::vector<TrainingTuple>& tuples, int num_depth, DepthSampling sampling,
+                                  const torch::Device& device) {
+  if (tuples.empty()) throw std::invalid_argument("make_training_batch: empty batch");
+  std::vector<torch::Tensor> images, proj, depth_values, loss_ref, loss_src, K_ref, K_src, T, gt;
+  bool any_gt = false;
+  for (const auto& t : tuples) {
+    t.validate();
+    if (t.network_views.size() != tuples[0].network_views.size() || t.loss_views.size() != tuples[0].loss_views.size() ||
+        t.network_views[0].camera.width != tuples[0].network_views[0].camera.width ||
+        t.network_views[0].camera.height != tuples[0].network_views[0].camera.height) {
+      throw std::invalid_argument("make_training_batch: tuple " + t.name + " differs in size or view count from " +
+                                  tuples[0].name);
+    }
+    std::vector<torch::Tensor> imgs;
+    std::vector<Camera> cams;
+    for (const auto& v : t.network_views) {
+      imgs.push_back(rgb8_to_float(v.image));
+      cams.push_back(v.camera);
+    }
+    images.push_back(torch::stack(imgs));
+    proj.push_back(mvsnet_projection_matrices(cams));
+    depth_values.push_back(depth_hypotheses(t.depth_min, t.depth_max, num_depth, sampling));
+
+    const Camera ref_cam = depth_map_camera(t.network_views[0].camera);
+    loss_ref.push_back(downsample_to_depth_grid(imgs[0].unsqueeze(0)).squeeze(0));
+    K_ref.push_back(intrinsics_tensor(ref_cam));
+    std::vector<torch::Tensor> srcs, ks, ts;
+    for (const auto& v : t.loss_views) {
+      srcs.push_back(downsample_to_depth_grid(rgb8_to_float(v.image).unsqueeze(0)).squeeze(0));
+      const Camera c = depth_map_camera(v.camera);
+      ks.push_back(intrinsics_tensor(c));
+      ts.push_back(relative_pose_tensor(ref_cam, c));
+    }
+    loss_src.push_back(torch::stack(srcs));
+    K_src.push_back(torch::stack(ks));
+    T.push_back(torch::stack(ts));
+    const int H = ref_cam.height, W = ref_cam.width;
+    if (t.depth_gt.defined()) {
+      any_gt = true;
+      gt.push_back(t.depth_gt.to(torch::kFloat32).slice(0, 0, H * 4, 4).slice(1, 0, W * 4, 4).contiguous());
+    } else {
+      gt.push_back(torch::zeros({H, W}));
+    }
+  }
+  TrainingBatch b;
+  b.images = torch::stack(images).to(device);
+  b.proj = torch::stack(proj).to(device);
+  b.depth_values = torch::stack(depth_values).to(device);
+  b.loss_ref = torch::stack(loss_ref).to(device);
+  b.loss_src = torch::stack(loss_src).to(device);
+  b.K_ref = torch::stack(K_ref).to(device);
+  b.K_src = torch::stack(K_src).to(device);
+  b.T_src_ref = torch::stack(T).to(device);
+  if (any_gt) b.depth_gt = torch::stack(gt).to(device);
+  return b;
+}
+
+DepthErrors depth_errors(const torch::Tensor& est, const torch::Tensor& gt) {
+  auto e = est.detach().to(torch::kCPU, torch::kFloat64), g = gt.detach().to(torch::kCPU, torch::kFloat64);
+  auto mask = (g > 0) & torch::isfinite(g) & torch::isfinite(e);
+  DepthErrors out;
+  out.pixels = mask.sum().item<int64_t>();
+  if (out.pixels == 0) return out;
+  auto err = (e - g).abs().masked_select(mask);
+  out.mean_abs = err.mean().item<double>();
+  out.median_abs = err.median().item<double>();
+  const auto g_valid = g.masked_select(mask);
+  out.abs_rel = (err / g_valid).mean().item<double>();
+  out.within_1pct = (err <= 0.01 * g_valid).to(torch::kFloat64).mean().item<double>();
+  return out;
+}
+
+void TrainerConfig::validate() const {
+  loss.validate();
+  if (num_depth < 8 || num_depth % 8 != 0) {
+    throw std::invalid_argument("num_depth must be a positive multiple of 8, got " + std::to_string(num_depth));
+  }
+  if (!(lr > 0) || !std::isfinite(lr)) throw std::invalid_argument("learning rate must be positive");
+  if (!(beta1 >= 0 && beta1 < 1) || !(beta2 >= 0 && beta2 < 1)) throw std::invalid_argument("Adam betas must be in [0,1)");
+}
+
+void LossValues::add(const LossTerms& t) {
+  total += t.total.item<double>();
+  photometric += t.photometric.item<double>();
+  ssim += t.ssim.item<double>();
+  smoothness += t.smoothness.item<double>();
+  valid_fraction += t.valid_fraction.item<double>();
+  ++count;
+}
+
+LossValues LossValues::mean() const {
+  if (count == 0) return *this;
+  LossValues m = *this;
+  for (double* v : {&m.total, &m.photometric, &m.ssim, &m.smoothness, &m.valid_fraction}) *v /= count;
+  m.count = 1;
+  return m;
+}
+
+Trainer::Trainer(MvsNet model, torch::Device device, TrainerConfig config)
+    : model_(std::move(model)), device_(device), config_(std::move(config)) {
+  config_.validate();
+  model_->to(device_);
+  model_->train();
+  optimizer_ = std::make_unique<torch::optim::Adam>(
+      model_->parameters(),
+      torch::optim::AdamOptions(config_.lr).betas(std::make_tuple(config_.beta1, config_.beta2)));
+}
+
+LossValues Trainer::step(const std::vector<TrainingTuple>& tuples) {
+  model_->train();
+  const auto b = make_training_batch(tuples, config_.num_depth, model_->config().depth_sampling, device_);
+  const auto out = model_->forward(b.images, b.proj, b.depth_values);
+  const auto terms = unsupervised_loss(b.loss_ref, b.loss_src, b.K_ref, b.K_src, b.T_src_ref, out.depth, config_.loss);
+  LossValues values;
+  values.add(terms);
+  optimizer_->zero_grad();
+  if (!std::isfinite(values.total)) return values;  // no update from a broken batch; the caller reports it
+  terms.total.backward();
+  optimizer_->step();
+  return values;
+}
+
+Evaluation evaluate_model(MvsNet& model, const std::vector<TrainingTuple>& tuples, const TrainerConfig& config,
+                          const torch::Device& device) {
+  config.validate();
+  torch::NoGradGuard no_grad;
+  const bool was_training = model->is_training();
+  model->eval();
+  Evaluation ev;
+  LossValues sum;
+  std::vector<torch::Tensor> est, gt;
+  for (const auto& t : tuples) {
+    const auto b = make_training_batch({t}, config.num_depth, model->config().depth_sampling, device);
+    const auto out = model->forward(b.images, b.proj, b.depth_values);
+    sum.add(unsupervised_loss(b.loss_ref, b.loss_src, b.K_ref, b.K_src, b.T_src_ref, out.depth, config.loss));
+    if (b.depth_gt.defined()) {
+      est.push_back(out.depth.flatten().cpu());
+      gt.push_back(b.depth_gt.flatten().cpu());
+    }
+    ++ev.tuples;
+  }
+  ev.loss = sum.mean();
+  if (!est.empty()) ev.depth = depth_errors(torch::cat(est), torch::cat(gt));
+  model->train(was_training);
+  return ev;
+}
+
+Evaluation Trainer::evaluate(const std::vector<TrainingTuple>& tuples) {
+  return evaluate_model(model_, tuples, config_, device_);
+}
+
+std::string Trainer::optimizer_state() const {
+  torch::serialize::OutputArchive archive;
+  optimizer_->save(archive);
+  std::ostringstream os;
+  archive.save_to(os);
+  return os.str();
+}
+
+void Trainer::load_optimizer_state(const std::string& bytes) {
+  if (bytes.empty()) return;
+  torch::serialize::InputArchive archive;
+  std::istringstream is(bytes);
+  archive.load_from(is, device_);
+  optimizer_->load(archive);
+}
+
+std::string torch_rng_state() {
+  at::Generator gen = at::detail::getDefaultCPUGenerator();
+  std::lock_guard<std::mutex> lock(gen.mutex());
+  auto state = gen.get_state().contiguous();
+  return std::string(reinterpret_cast<const char*>(state.data_ptr<uint8_t>()), state.numel());
+}
+
+void set_torch_rng_state(const std::string& bytes) {
+  if (bytes.empty()) return;
+  auto state = torch::empty({static_cast<int64_t>(bytes.size())}, torch::kUInt8);
+  std::memcpy(state.data_ptr<uint8_t>(), bytes.data(), bytes.size());
+  at::Generator gen = at::detail::getDefaultCPUGenerator();
+  std::lock_guard<std::mutex> lock(gen.mutex());
+  gen.set_state(state);
+}
+
+namespace {
+
+// 3x5 glyphs for the axis labels: rows top to bottom, 3 bits each (MSB = left).
+const char* kGlyphChars = "0123456789.-e+";
+const uint8_t kGlyphs[][5] = {
+    {7, 5, 5, 5, 7}, {2, 6, 2, 2, 7}, {7, 1, 7, 4, 7}, {7, 1, 7, 1, 7}, {5, 5, 7, 1, 1},
+    {7, 4, 7, 1, 7}, {7, 4, 7, 5, 7}, {7, 1, 1, 1, 1}, {7, 5, 7, 5, 7}, {7, 5, 7, 1, 7},
+    {0, 0, 0, 0, 2}, {0, 0, 7, 0, 0}, {0, 7, 5, 6, 7}, {0, 2, 7, 2, 0},
+};
+
+void draw_text(torch::TensorAccessor<uint8_t, 3>& img, int x, int y, const std::string& text, int scale = 2) {
+  const int H = img.size(0), W = img.size(1);
+  for (char ch : text) {
+    const char* p = std::strchr(kGlyphChars, ch);
+    if (p != nullptr && ch != '\0') {
+      const auto& g = kGlyphs[p - kGlyphChars];
+      for (int r = 0; r < 5; ++r)
+        for (int c = 0; c < 3; ++c)
+          if (g[r] & (4 >> c))
+            for (int dy = 0; dy < scale; ++dy)
+              for (int dx = 0; dx < scale; ++dx) {
+                const int yy = y + r * scale + dy, xx = x + c * scale + dx;
+                if (yy >= 0 && yy < H && xx >= 0 && xx < W)
+                  for (int k = 0; k < 3; ++k) img[yy][xx][k] = 0;
+              }
+    }
+    x += 4 * scale;
+  }
+}
+
+}  // namespace
+
+torch::Tensor render_curves(const std::vector<CurveSeries>& series, int width, int height) {
+  auto img = torch::full({height, width, 3}, 255, torch::kUInt8);
+  auto a = img.accessor<uint8_t, 3>();
+  double x0 = INFINITY, x1 = -INFINITY, y0 = INFINITY, y1 = -INFINITY;
+  for (const auto& s : series)
+    for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
+      if (!std::isfinite(s.y[i]) || s.y[i] <= 0) continue;
+      x0 = std::min(x0, s.x[i]);
+      x1 = std::max(x1, s.x[i]);
+      y0 = std::min(y0, std::log10(s.y[i]));
+      y1 = std::max(y1, std::log10(s.y[i]));
+    }
+  if (!std::isfinite(x0)) return img;
+  if (x1 <= x0) x1 = x0 + 1;
+  if (y1 - y0 < 1e-3) y0 -= 0.05, y1 += 0.05;
+  const int left = 60, right = width - 10, top = 10, bottom = height - 20;
+  auto px = [&](double x) { return left + (x - x0) / (x1 - x0) * (right - left); };
+  auto py = [&](double ly) { return bottom - (ly - y0) / (y1 - y0) * (bottom - top); };
+  auto put = [&](int x, int y, uint8_t r, uint8_t g, uint8_t b) {
+    if (x >= 0 && x < width && y >= 0 && y < height) a[y][x][0] = r, a[y][x][1] = g, a[y][x][2] = b;
+  };
+  for (int p = static_cast<int>(std::floor(y0)); p <= static_cast<int>(std::ceil(y1)); ++p)  // decades
+    for (int d = 1; d < 10; ++d) {
+      const double ly = p + std::log10(static_cast<double>(d));
+      if (ly < y0 || ly > y1) continue;
+      const int y = static_cast<int>(std::lround(py(ly)));
+      const uint8_t shade = d == 1 ? 170 : 225;
+      for (int x = left; x <= right; ++x) put(x, y, shade, shade, shade);
+    }
+  for (int y = top; y <= bottom; ++y) put(left, y, 0, 0, 0);
+  for (int x = left; x <= right; ++x) put(x, bottom, 0, 0, 0);
+  for (const auto& s : series) {
+    bool have = false;
+    double lx = 0, ly = 0;
+    for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
+      if (!std::isfinite(s.y[i]) || s.y[i] <= 0) continue;
+      const double cx = px(s.x[i]), cy = py(std::log10(s.y[i]));
+      if (have) {
+        const int n = static_cast<int>(std::max(std::abs(cx - lx), std::abs(cy - ly))) + 1;
+        for (int k = 0; k <= n; ++k) {
+          const int x = static_cast<int>(std::lround(lx + (cx - lx) * k / n));
+          const int y = static_cast<int>(std::lround(ly + (cy - ly) * k / n));
+          put(x, y, s.r, s.g, s.b);
+          put(x, y + 1, s.r, s.g, s.b);
+        }
+      } else {
+        put(static_cast<int>(cx), static_cast<int>(cy), s.r, s.g, s.b);
+      }
+      have = true;
+      lx = cx, ly = cy;
+    }
+  }
+  char buf[32];
+  std::snprintf(buf, sizeof(buf), "%.3g", std::pow(10.0, y1));
+  draw_text(a, 2, top, buf);
+  std::snprintf(buf, sizeof(buf), "%.3g", std::pow(10.0, y0));
+  draw_text(a, 2, bottom - 10, buf);
+  std::snprintf(buf, sizeof(buf), "%.0f", x0);
+  draw_text(a, left, bottom + 5, buf);
+  std::snprintf(buf, sizeof(buf), "%.0f", x1);
+  draw_text(a, right - 8 * static_cast<int>(std::strlen(buf)), bottom + 5, buf);
+  return img;
+}
+
+}  // namespace umvs
