@@ -1,0 +1,84 @@
+// Training tuples (core/training.h) from data on disk. A TupleSource is anything that can hand
+// out tuples by index; `umvs train` mixes sources, so other kinds (e.g. keyframes from rosbags)
+// only need to implement this interface.
+#pragma once
+
+#include <memory>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "unsup_mvs/core/training.h"
+#include "unsup_mvs/io/mvs_folder.h"
+
+namespace umvs {
+
+struct TupleConfig {
+  int views_in = 3;     // views the network sees (reference + N-1 best neighbours)
+  int views_loss = 6;   // neighbours the loss warps into the reference (M)
+  int width = 640;      // network input size (multiples of 32); 0 = the reference's size rounded down
+  int height = 512;
+  int num_depth = 128;  // only to resolve cam files that give DEPTH_MIN and DEPTH_INTERVAL alone
+  // Augmentation (training only): zoom in by a random factor in [1, max_zoom] and crop at a
+  // random offset (intrinsics follow), then one photometric jitter for all views of the tuple:
+  // contrast and per-channel gain in [1 - jitter, 1 + jitter], brightness in [-jitter/2, jitter/2].
+  double max_zoom = 1.25;
+  double jitter = 0.1;
+  void validate() const;  // throws std::invalid_argument naming the field
+};
+
+class TupleSource {
+ public:
+  virtual ~TupleSource() = default;
+  virtual size_t size() const = 0;
+  // The tuple at `index` (0 <= index < size()). With `rng` it is augmented (random crop and
+  // jitter drawn from rng), without it resized and centre-cropped deterministically.
+  virtual TrainingTuple tuple(size_t index, std::mt19937_64* rng) const = 0;
+  virtual std::string description() const = 0;
+};
+
+// Tuples from MVSNet-format folders: every view with enough neighbours in pair.txt is a
+// reference; its best views_in-1 neighbours feed the network, its best views_loss neighbours the
+// loss. Ground truth comes from depth_gt/XXXXXXXX.pfm when present.
+class MvsFolderSource : public TupleSource {
+ public:
+  // Throws std::runtime_error naming the folder when it is unreadable or has no usable reference.
+  MvsFolderSource(const std::vector<std::string>& roots, TupleConfig config);
+  size_t size() const override { return entries_.size(); }
+  TrainingTuple tuple(size_t index, std::mt19937_64* rng) const override;
+  std::string description() const override;
+  bool has_ground_truth() const { return has_gt_; }
+
+ private:
+  struct Entry {
+    size_t folder;
+    int ref;
+    std::vector<int> sources;  // best first, max(views_in - 1, views_loss) of them
+  };
+  std::vector<MvsFolder> folders_;
+  std::vector<Entry> entries_;
+  TupleConfig config_;
+  int skipped_ = 0;
+  bool has_gt_ = false;
+};
+
+// Nearest-neighbour resampling of a depth map [H0,W0] with a NetworkResize plan  -> [h,w]
+torch::Tensor apply_network_resize_nearest(const torch::Tensor& depth, const NetworkResize& plan);
+
+// Cycles through a source in random order, reshuffling each epoch; its whole state (the source
+// order, position and the augmentation RNG) is saved and restored for exact resume.
+class TupleSampler {
+ public:
+  TupleSampler(const TupleSource& source, uint64_t seed);
+  TrainingTuple next(bool augment = true);
+  std::string state() const;                 // text
+  void set_state(const std::string& state);  // throws std::runtime_error when malformed
+
+ private:
+  const TupleSource& source_;
+  std::mt19937_64 rng_;
+  std::vector<size_t> order_;
+  size_t position_ = 0;
+};
+
+}  // namespace umvs

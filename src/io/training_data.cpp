@@ -1,0 +1,184 @@
+#include "unsup_mvs/io/training_data.h"
+
+#include <torch/torch.h>
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+#include <sstream>
+#include <stdexcept>
+
+#include "unsup_mvs/core/image_ops.h"
+#include "unsup_mvs/io/array_io.h"
+
+namespace umvs {
+
+void TupleConfig::validate() const {
+  auto bad = [](const std::string& what) { throw std::invalid_argument(what); };
+  if (views_in < 2) bad("--views-in must be at least 2 (reference + 1), got " + std::to_string(views_in));
+  if (views_loss < 1) bad("--views-loss must be at least 1, got " + std::to_string(views_loss));
+  if (width < 0 || height < 0 || width % 32 != 0 || height % 32 != 0) {
+    bad("--width/--height must be multiples of 32 (0 = from the images), got " + std::to_string(width) + "x" +
+        std::to_string(height));
+  }
+  if (!(max_zoom >= 1.0) || !std::isfinite(max_zoom)) bad("max_zoom must be >= 1");
+  if (!(jitter >= 0.0 && jitter < 1.0)) bad("jitter must be in [0, 1)");
+}
+
+namespace {
+
+double uniform(std::mt19937_64& rng, double lo, double hi) {
+  // Explicit mapping (not std::uniform_real_distribution) so the sequence is the same everywhere.
+  return lo + (hi - lo) * static_cast<double>(rng() >> 11) * (1.0 / 9007199254740992.0);
+}
+
+// Scale so the image covers width x height (times zoom), then crop at (fx, fy) in [0,1] of the slack.
+NetworkResize cover_and_crop(int W0, int H0, int width, int height, double zoom, double fx, double fy) {
+  NetworkResize p;
+  const double s = std::max(static_cast<double>(width) / W0, static_cast<double>(height) / H0) * zoom;
+  p.scaled_width = std::max(width, static_cast<int>(std::lround(W0 * s)));
+  p.scaled_height = std::max(height, static_cast<int>(std::lround(H0 * s)));
+  p.width = width;
+  p.height = height;
+  p.crop_x = static_cast<int>(std::floor(fx * (p.scaled_width - width) + 0.5));
+  p.crop_y = static_cast<int>(std::floor(fy * (p.scaled_height - height) + 0.5));
+  return p;
+}
+
+}  // namespace
+
+torch::Tensor apply_network_resize_nearest(const torch::Tensor& depth, const NetworkResize& plan) {
+  const int64_t H0 = depth.size(0), W0 = depth.size(1);
+  auto index = [](int64_t n, int scaled, int n0, int crop) {
+    auto i = torch::arange(n, torch::kFloat64) + crop;
+    return ((i + 0.5) * (static_cast<double>(n0) / scaled) - 0.5).round().clamp(0, n0 - 1).to(torch::kLong);
+  };
+  auto rows = index(plan.height, plan.scaled_height, H0, plan.crop_y);
+  auto cols = index(plan.width, plan.scaled_width, W0, plan.crop_x);
+  return depth.index_select(0, rows).index_select(1, cols).contiguous();
+}
+
+MvsFolderSource::MvsFolderSource(const std::vector<std::string>& roots, TupleConfig config)
+    : config_(std::move(config)) {
+  config_.validate();
+  if (roots.empty()) throw std::invalid_argument("no training data folder given");
+  const int needed = std::max(config_.views_in - 1, config_.views_loss);
+  for (const auto& root : roots) {
+    folders_.emplace_back(root);
+    size_t usable = 0;
+    for (const auto& p : folders_.back().pairs()) {
+      if (static_cast<int>(p.sources.size()) < needed) {
+        ++skipped_;
+        continue;
+      }
+      entries_.push_back({folders_.size() - 1, p.ref, std::vector<int>(p.sources.begin(), p.sources.begin() + needed)});
+      if (!folders_.back().depth_gt_path(p.ref).empty()) has_gt_ = true;
+      ++usable;
+    }
+    if (usable == 0) {
+      throw std::runtime_error(root + ": no view has the " + std::to_string(needed) +
+                               " neighbours in pair.txt that --views-in/--views-loss need");
+    }
+  }
+}
+
+std::string MvsFolderSource::description() const {
+  std::ostringstream s;
+  s << entries_.size() << " tuples from " << folders_.size() << " folder(s)";
+  if (skipped_ > 0) s << " (" << skipped_ << " views with too few neighbours skipped)";
+  s << (has_gt_ ? ", with ground-truth depth" : ", no ground truth");
+  return s.str();
+}
+
+TrainingTuple MvsFolderSource::tuple(size_t index, std::mt19937_64* rng) const {
+  if (index >= entries_.size()) throw std::out_of_range("tuple index " + std::to_string(index) + " out of range");
+  const Entry& e = entries_[index];
+  const MvsFolder& folder = folders_[e.folder];
+  const MvsView ref = folder.load_view(e.ref);
+  const int W0 = ref.cam.camera.width, H0 = ref.cam.camera.height;
+  int width = config_.width, height = config_.height;
+  if (width == 0 || height == 0) {
+    const auto p = plan_network_resize(W0, H0, 0, 0);
+    width = p.width;
+    height = p.height;
+  }
+  const double zoom = rng ? uniform(*rng, 1.0, config_.max_zoom) : 1.0;
+  const double fx = rng ? uniform(*rng, 0.0, 1.0) : 0.5, fy = rng ? uniform(*rng, 0.0, 1.0) : 0.5;
+  // One photometric change for the whole tuple: contrast, brightness, per-channel gain.
+  torch::Tensor gain;
+  double contrast = 1.0, brightness = 0.0;
+  if (rng && config_.jitter > 0) {
+    const double j = config_.jitter;
+    contrast = uniform(*rng, 1 - j, 1 + j);
+    brightness = uniform(*rng, -j / 2, j / 2);
+    gain = torch::tensor({uniform(*rng, 1 - j, 1 + j), uniform(*rng, 1 - j, 1 + j), uniform(*rng, 1 - j, 1 + j)},
+                         torch::kFloat32).view({3, 1, 1});
+  }
+
+  TrainingTuple t;
+  t.name = folder.root() + " view " + std::to_string(e.ref);
+  auto make_view = [&](const MvsView& v) {
+    if (v.cam.camera.width != W0 || v.cam.camera.height != H0) {
+      throw std::runtime_error(folder.image_path(v.id) + ": image size differs from the reference view's");
+    }
+    const NetworkResize plan = cover_and_crop(W0, H0, width, height, zoom, fx, fy);
+    auto img = apply_network_resize(rgb8_to_float(v.image), plan);
+    if (gain.defined()) img = (((img - 0.5) * contrast + 0.5 + brightness) * gain).clamp(0, 1);
+    return ViewInput{float_to_rgb8(img), apply_network_resize(v.cam.camera, plan)};
+  };
+  t.network_views.push_back(make_view(ref));
+  std::vector<ViewInput> sources;
+  for (int id : e.sources) sources.push_back(make_view(folder.load_view(id)));
+  t.network_views.insert(t.network_views.end(), sources.begin(), sources.begin() + (config_.views_in - 1));
+  t.loss_views.assign(sources.begin(), sources.begin() + config_.views_loss);
+  t.depth_min = ref.cam.depth_min;
+  t.depth_max = ref.cam.resolved_depth_max(config_.num_depth);
+  const std::string gt_path = folder.depth_gt_path(e.ref);
+  if (!gt_path.empty()) {
+    auto gt = read_pfm(gt_path);
+    if (gt.dim() != 2 || gt.size(0) != H0 || gt.size(1) != W0) {
+      throw std::runtime_error(gt_path + ": ground-truth depth size differs from the image's");
+    }
+    t.depth_gt = apply_network_resize_nearest(gt, cover_and_crop(W0, H0, width, height, zoom, fx, fy));
+  }
+  t.validate();
+  return t;
+}
+
+TupleSampler::TupleSampler(const TupleSource& source, uint64_t seed) : source_(source), rng_(seed) {
+  if (source.size() == 0) throw std::invalid_argument("empty training source");
+}
+
+TrainingTuple TupleSampler::next(bool augment) {
+  if (position_ >= order_.size()) {
+    order_.resize(source_.size());
+    std::iota(order_.begin(), order_.end(), size_t{0});
+    for (size_t i = order_.size(); i > 1; --i) std::swap(order_[i - 1], order_[rng_() % i]);  // Fisher-Yates
+    position_ = 0;
+  }
+  return source_.tuple(order_[position_++], augment ? &rng_ : nullptr);
+}
+
+std::string TupleSampler::state() const {
+  std::ostringstream s;
+  s << rng_ << "\n" << position_ << " " << order_.size();
+  for (size_t i : order_) s << " " << i;
+  return s.str();
+}
+
+void TupleSampler::set_state(const std::string& state) {
+  std::istringstream s(state);
+  std::mt19937_64 rng;
+  size_t position = 0, n = 0;
+  s >> rng >> position >> n;
+  std::vector<size_t> order(n);
+  for (auto& i : order) s >> i;
+  if (!s || position > n || std::any_of(order.begin(), order.end(), [&](size_t i) { return i >= source_.size(); })) {
+    throw std::runtime_error("training sampler state is malformed or belongs to other data");
+  }
+  rng_ = rng;
+  position_ = position;
+  order_ = std::move(order);
+}
+
+}  // namespace umvs
