@@ -1,0 +1,365 @@
+// umvs train: unsupervised training / fine-tuning of MVSNet with the robust photometric loss.
+#include <torch/torch.h>
+
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+
+#include "unsup_mvs/core/device.h"
+#include "unsup_mvs/core/training.h"
+#include "unsup_mvs/io/atomic_file.h"
+#include "unsup_mvs/io/checkpoint.h"
+#include "unsup_mvs/io/image_io.h"
+#include "unsup_mvs/io/training_data.h"
+#include "unsup_mvs/tools/args.h"
+#include "unsup_mvs/tools/command.h"
+#include "unsup_mvs/tools/progress.h"
+
+namespace fs = std::filesystem;
+
+namespace {
+
+const char* kCsvHeader =
+    "step,total,photometric,ssim,smoothness,valid_fraction,lr,seconds,val_photometric,val_total,val_abs_err,"
+    "val_within_1pct";
+
+struct LogRow {
+  int64_t step = 0;
+  umvs::LossValues loss;
+  double lr = 0, seconds = 0;
+  bool has_val = false;
+  umvs::Evaluation val;
+};
+
+std::string csv_line(const LogRow& r) {
+  std::ostringstream s;
+  s.precision(7);
+  s << r.step << "," << r.loss.total << "," << r.loss.photometric << "," << r.loss.ssim << "," << r.loss.smoothness
+    << "," << r.loss.valid_fraction << "," << r.lr << "," << r.seconds << ",";
+  if (r.has_val) {
+    s << r.val.loss.photometric << "," << r.val.loss.total << ",";
+    if (r.val.depth.pixels > 0) s << r.val.depth.mean_abs << "," << r.val.depth.within_1pct;
+    else s << ",";
+  } else {
+    s << ",,,";
+  }
+  return s.str();
+}
+
+// Lower is better: GT depth error when the validation data has ground truth, else its photometric loss.
+double val_score(const umvs::Evaluation& ev) {
+  return ev.depth.pixels > 0 ? ev.depth.mean_abs : ev.loss.total;
+}
+
+std::string describe(const umvs::Evaluation& ev) {
+  std::ostringstream s;
+  s.precision(4);
+  s << "photometric " << ev.loss.photometric << ", ssim " << ev.loss.ssim << ", total " << ev.loss.total;
+  if (ev.depth.pixels > 0) {
+    s << ", depth |err| mean " << ev.depth.mean_abs << " median " << ev.depth.median_abs << ", abs rel "
+      << ev.depth.abs_rel << ", within 1% "
+      << 100.0 * ev.depth.within_1pct << "%";
+  }
+  s << " (" << ev.tuples << " tuples)";
+  return s.str();
+}
+
+// The rng_state of a checkpoint: the sampler's text state, a NUL, then LibTorch's generator bytes.
+std::string pack_rng(const umvs::TupleSampler& sampler) { return sampler.state() + '\0' + umvs::torch_rng_state(); }
+void unpack_rng(const std::string& bytes, umvs::TupleSampler& sampler) {
+  const auto nul = bytes.find('\0');
+  if (nul == std::string::npos) throw std::runtime_error("checkpoint has no training RNG state: cannot resume exactly");
+  sampler.set_state(bytes.substr(0, nul));
+  umvs::set_torch_rng_state(bytes.substr(nul + 1));
+}
+
+std::vector<LogRow> read_log(const std::string& path, int64_t max_step, std::vector<std::string>* lines) {
+  std::vector<LogRow> rows;
+  std::ifstream in(path);
+  std::string line;
+  std::getline(in, line);  // header
+  while (std::getline(in, line)) {
+    std::vector<std::string> f;
+    std::stringstream ss(line);
+    for (std::string c; std::getline(ss, c, ',');) f.push_back(c);
+    if (f.size() < 8) continue;
+    LogRow r;
+    r.step = std::stoll(f[0]);
+    if (r.step > max_step) break;  // written after the checkpoint we resume from
+    r.loss.total = std::stod(f[1]);
+    if (f.size() > 9 && !f[9].empty()) {
+      r.has_val = true;
+      r.val.loss.total = std::stod(f[9]);
+      if (f.size() > 10 && !f[10].empty()) {
+        r.val.depth.mean_abs = std::stod(f[10]);
+        r.val.depth.pixels = 1;
+      }
+    }
+    rows.push_back(r);
+    lines->push_back(line);
+  }
+  return rows;
+}
+
+void write_curve(const std::string& path, const std::vector<LogRow>& rows) {
+  umvs::CurveSeries raw{{}, {}, 190, 190, 235}, smooth{{}, {}, 20, 60, 200}, val{{}, {}, 220, 40, 30};
+  double ema = 0;
+  for (size_t i = 0; i < rows.size(); ++i) {
+    const double v = rows[i].loss.total;
+    raw.x.push_back(rows[i].step);
+    raw.y.push_back(v);
+    ema = i == 0 ? v : 0.95 * ema + 0.05 * v;
+    smooth.x.push_back(rows[i].step);
+    smooth.y.push_back(ema);
+    if (rows[i].has_val) {
+      val.x.push_back(rows[i].step);
+      val.y.push_back(val_score(rows[i].val));
+    }
+  }
+  umvs::write_png(path, umvs::render_curves({raw, smooth, val}));
+}
+
+std::vector<umvs::TrainingTuple> fixed_tuples(const umvs::TupleSource& source, int limit) {
+  std::vector<umvs::TrainingTuple> out;
+  const size_t n = source.size();
+  const size_t count = limit > 0 ? std::min<size_t>(n, static_cast<size_t>(limit)) : n;
+  for (size_t i = 0; i < count; ++i) out.push_back(source.tuple(i * n / count, nullptr));
+  return out;
+}
+
+}  // namespace
+
+UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photometric loss") {
+  umvs::Args args(
+      "train",
+      "Trains MVSNet without ground truth: each step runs the network on a reference and its best\n"
+      "neighbours (pair.txt) and minimises the photometric loss of warping the best --views-loss\n"
+      "neighbours into the reference with the predicted depth. Writes into OUT:\n"
+      "  last.pt, best.pt     checkpoints (model, Adam state, step, RNG), written atomically\n"
+      "  train_log.csv        step, loss terms, lr, seconds, validation metrics\n"
+      "  loss_curve.png       training loss (raw, smoothed) and validation score (red), log scale\n"
+      "best.pt is only replaced by a model with a lower validation score: GT depth error when the\n"
+      "--val folders have depth_gt/, else their photometric loss (without --val: the training loss\n"
+      "since the previous checkpoint). With --eval-only CHECKPOINT nothing is trained: the held-out\n"
+      "loss (and GT depth error) of that checkpoint on --data is printed (and written to OUT/eval.csv).");
+  args.required("data", "MVSNet-format folder(s), comma-separated")
+      .option("out", "", "output folder (required unless --eval-only)")
+      .option("init", "", "start from this checkpoint (ours or MVSNet_pytorch weights); default random")
+      .flag("resume", "continue exactly from OUT/last.pt")
+      .option("eval-only", "", "evaluate this checkpoint on --data and exit")
+      .option("loss", "robust", "naive | first-order | robust (first-order + top-K)")
+      .option("preset", "paper", "loss weights: paper (0.8/0.2/0.0067) | authors (12/6/0.18, Huber, normalised)")
+      .option("views-in", "3", "views the network sees (reference + neighbours)")
+      .option("views-loss", "6", "neighbours warped by the loss (M)")
+      .option("top-k", "3", "views kept per pixel by --loss robust (1..M)")
+      .option("width", "640", "network input width (multiple of 32; 0 = from the images)")
+      .option("height", "512", "network input height (multiple of 32; 0 = from the images)")
+      .option("num-depth", "128", "depth hypotheses during training (multiple of 8)")
+      .option("depth-sampling", "depth", "depth | inverse_depth (new models only)")
+      .option("steps", "10000", "total optimisation steps (0: write the initial model and exit)")
+      .option("batch", "1", "tuples per step")
+      .option("lr", "1e-3", "Adam learning rate")
+      .option("beta1", "0.95", "Adam beta1")
+      .option("val", "", "validation folder(s), comma-separated")
+      .option("val-tuples", "0", "validate on at most this many tuples (0 = all)")
+      .option("save-every", "500", "validate and checkpoint every this many steps (and at the end)")
+      .option("augment", "1", "1: random zoom/crop and photometric jitter; 0: none")
+      .option("jitter", "0.1", "photometric jitter strength")
+      .option("seed", "1", "seed of the initial weights and of the data order")
+      .option("device", "cpu", "cpu | cuda | cuda:N")
+      .option("threads", "0", "CPU threads (0 = all cores)");
+  if (!args.parse(argc, argv)) return 0;
+
+  umvs::configure_threads(args.integer("threads"));
+  const auto device = umvs::parse_device(args.str("device"));
+
+  umvs::TrainerConfig tcfg;
+  const std::string preset = args.str("preset");
+  if (preset == "paper") tcfg.loss = umvs::LossConfig::paper();
+  else if (preset == "authors") tcfg.loss = umvs::LossConfig::authors_code();
+  else throw std::invalid_argument("--preset must be paper or authors, got '" + preset + "'");
+  const std::string loss = args.str("loss");
+  if (loss == "naive") tcfg.loss.term = umvs::PhotometricTerm::kNaive, tcfg.loss.top_k = 0;
+  else if (loss == "first-order") tcfg.loss.term = umvs::PhotometricTerm::kFirstOrder, tcfg.loss.top_k = 0;
+  else if (loss == "robust") tcfg.loss.term = umvs::PhotometricTerm::kFirstOrder, tcfg.loss.top_k = args.integer("top-k");
+  else throw std::invalid_argument("--loss must be naive, first-order or robust, got '" + loss + "'");
+  tcfg.num_depth = args.integer("num-depth");
+  tcfg.lr = args.real("lr");
+  tcfg.beta1 = args.real("beta1");
+  tcfg.validate();
+
+  umvs::TupleConfig data_cfg;
+  data_cfg.views_in = args.integer("views-in");
+  data_cfg.views_loss = args.integer("views-loss");
+  data_cfg.width = args.integer("width");
+  data_cfg.height = args.integer("height");
+  data_cfg.num_depth = tcfg.num_depth;
+  data_cfg.jitter = args.real("jitter");
+  const bool augment = args.integer("augment") != 0;
+  if (!augment) data_cfg.max_zoom = 1.0;
+  if (tcfg.loss.top_k > data_cfg.views_loss) {
+    throw std::invalid_argument("--top-k " + std::to_string(tcfg.loss.top_k) + " exceeds --views-loss " +
+                                std::to_string(data_cfg.views_loss));
+  }
+  const umvs::MvsFolderSource source(args.all("data"), data_cfg);
+  std::cerr << "data: " << source.description() << "\nloss: " << tcfg.loss.to_string() << "\n";
+
+  if (args.given("eval-only")) {
+    auto loaded = umvs::load_model(args.str("eval-only"), device);
+    const auto ev = umvs::evaluate_model(loaded.model, fixed_tuples(source, args.integer("val-tuples")), tcfg, device);
+    std::cout << args.str("eval-only") << ": " << describe(ev) << "\n";
+    if (!args.str("out").empty()) {
+      umvs::make_directories(args.str("out"));
+      umvs::write_file_atomically(args.str("out") + "/eval.csv", [&](std::ostream& os) {
+        os << "checkpoint,tuples,photometric,ssim,smoothness,total,abs_err,median_abs_err,abs_rel,within_1pct\n"
+           << args.str("eval-only") << "," << ev.tuples << "," << ev.loss.photometric << "," << ev.loss.ssim << ","
+           << ev.loss.smoothness << "," << ev.loss.total << ",";
+        if (ev.depth.pixels > 0) {
+          os << ev.depth.mean_abs << "," << ev.depth.median_abs << "," << ev.depth.abs_rel << "," << ev.depth.within_1pct;
+        } else {
+          os << ",,,";
+        }
+        os << "\n";
+      });
+    }
+    return 0;
+  }
+
+  const std::string out = args.str("out");
+  if (out.empty()) throw std::invalid_argument("--out is required for training");
+  umvs::make_directories(out);
+  const std::string last_path = out + "/last.pt", best_path = out + "/best.pt", log_path = out + "/train_log.csv";
+  std::unique_ptr<umvs::MvsFolderSource> val_source;
+  std::vector<umvs::TrainingTuple> val_tuples;
+  if (args.given("val")) {
+    val_source = std::make_unique<umvs::MvsFolderSource>(args.all("val"), data_cfg);
+    val_tuples = fixed_tuples(*val_source, args.integer("val-tuples"));
+    std::cerr << "validation: " << val_source->description() << ", using " << val_tuples.size() << "\n";
+  }
+
+  // The model: resumed, initialised from a checkpoint, or random.
+  const bool resume = args.on("resume");
+  umvs::MvsNet model{nullptr};
+  umvs::CheckpointMeta meta;
+  double best = INFINITY;
+  if (resume) {
+    if (!fs::exists(last_path)) throw std::runtime_error("--resume: " + last_path + " does not exist");
+    auto loaded = umvs::load_model(last_path, device);
+    model = loaded.model;
+    meta = loaded.meta;
+    if (meta.metrics.count("best_score")) best = meta.metrics.at("best_score");
+    std::cerr << "resuming " << last_path << " at step " << meta.step << "\n";
+  } else if (args.given("init")) {
+    auto loaded = umvs::load_model(args.str("init"), device);
+    model = loaded.model;
+    std::cerr << "initialised from " << args.str("init") << " (" << loaded.format << ")\n";
+  } else {
+    torch::manual_seed(args.integer("seed"));
+    umvs::MvsNetConfig mcfg;
+    mcfg.num_depth = tcfg.num_depth;
+    mcfg.num_views = data_cfg.views_in;
+    mcfg.depth_sampling = umvs::depth_sampling_from_string(args.str("depth-sampling"));
+    model = umvs::MvsNet(mcfg);
+  }
+  model->set_num_depth(tcfg.num_depth);
+  umvs::Trainer trainer(model, device, tcfg);
+  umvs::TupleSampler sampler(source, static_cast<uint64_t>(args.integer("seed")));
+  int64_t step = 0;
+  std::vector<LogRow> history;
+  std::vector<std::string> kept_lines;
+  if (resume) {
+    trainer.load_optimizer_state(meta.optimizer_state);
+    unpack_rng(meta.rng_state, sampler);
+    step = meta.step;
+    history = read_log(log_path, step, &kept_lines);
+  }
+  // The log holds exactly the rows up to the starting step (rows after the resumed checkpoint are dropped).
+  umvs::write_file_atomically(log_path, [&](std::ostream& os) {
+    os << kCsvHeader << "\n";
+    for (const auto& l : kept_lines) os << l << "\n";
+  });
+  std::ofstream log(log_path, std::ios::app);
+
+  const int64_t total_steps = args.integer("steps");
+  const int save_every = std::max(1, args.integer("save-every"));
+  const int batch = args.integer("batch");
+  if (total_steps < 0 || batch < 1) throw std::invalid_argument("--steps must be >= 0 and --batch >= 1");
+  double interval_loss = 0;
+  int interval_count = 0;
+
+  auto checkpoint = [&](LogRow& row) {
+    double score = interval_count > 0 ? interval_loss / interval_count : INFINITY;
+    if (!val_tuples.empty()) {
+      row.val = trainer.evaluate(val_tuples);
+      row.has_val = true;
+      score = val_score(row.val);
+      std::cerr << "\nstep " << row.step << " validation: " << describe(row.val) << "\n";
+    }
+    interval_loss = 0;
+    interval_count = 0;
+    const bool improved = std::isfinite(score) ? score < best : !fs::exists(best_path);
+    if (improved && std::isfinite(score)) best = score;
+    umvs::CheckpointMeta m;
+    m.step = row.step;
+    m.optimizer_state = trainer.optimizer_state();
+    m.rng_state = pack_rng(sampler);
+    m.metrics["score"] = score;
+    m.metrics["best_score"] = best;
+    m.metrics["train_total"] = row.loss.total;
+    if (row.has_val) {
+      m.metrics["val_photometric"] = row.val.loss.photometric;
+      m.metrics["val_total"] = row.val.loss.total;
+      if (row.val.depth.pixels > 0) m.metrics["val_abs_err"] = row.val.depth.mean_abs;
+    }
+    umvs::save_checkpoint(last_path, trainer.model(), m);
+    if (improved) umvs::save_checkpoint(best_path, trainer.model(), m);
+  };
+
+  if (total_steps == 0 || step >= total_steps) {
+    LogRow row;
+    row.step = step;
+    checkpoint(row);
+    std::cout << "wrote the model at step " << step << " to " << last_path << " and " << best_path << "\n";
+    return 0;
+  }
+
+  std::cerr << "training " << total_steps - step << " steps (" << step << " done), batch " << batch << ", "
+            << data_cfg.width << "x" << data_cfg.height << ", D=" << tcfg.num_depth << ", device " << device << ", "
+            << torch::get_num_threads() << " threads\n";
+  umvs::Progress progress("train", total_steps - step, std::max<int64_t>(1, (total_steps - step) / 50));
+  const int64_t first = step;
+  int bad_steps = 0;
+  while (step < total_steps) {
+    const auto t0 = std::chrono::steady_clock::now();
+    std::vector<umvs::TrainingTuple> tuples;
+    for (int i = 0; i < batch; ++i) tuples.push_back(sampler.next(augment));
+    LogRow row;
+    row.loss = trainer.step(tuples).mean();
+    row.step = ++step;
+    row.lr = tcfg.lr;
+    row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    if (!std::isfinite(row.loss.total)) {
+      ++bad_steps;
+      std::cerr << "\nstep " << step << ": non-finite loss on " << tuples[0].name << ", update skipped\n";
+    } else {
+      interval_loss += row.loss.total;
+      ++interval_count;
+    }
+    if (step % save_every == 0 || step == total_steps) {
+      checkpoint(row);
+    }
+    log << csv_line(row) << "\n" << std::flush;
+    history.push_back(row);
+    if (row.has_val || step == total_steps) write_curve(out + "/loss_curve.png", history);
+    char extra[160];
+    std::snprintf(extra, sizeof(extra), "loss %.4f (photo %.4f ssim %.4f smooth %.4f)", row.loss.total,
+                  row.loss.photometric, row.loss.ssim, row.loss.smoothness);
+    progress.update(step - first, extra);
+  }
+  progress.finish();
+  std::cout << "trained to step " << step << "; checkpoints " << last_path << ", " << best_path << " (best score "
+            << best << "); log " << log_path << (bad_steps ? "; " + std::to_string(bad_steps) + " steps skipped" : "")
+            << "\n";
+  return 0;
+}
