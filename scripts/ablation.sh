@@ -14,11 +14,11 @@ set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 UMVS="${UMVS:-$here/../build/devel/lib/unsup_mvs/umvs}"
 WORK="${1:-/tmp/umvs_ablation}"
-STEPS="${STEPS:-400}"
-WIDTH="${WIDTH:-160}"
-HEIGHT="${HEIGHT:-128}"
-NUM_DEPTH="${NUM_DEPTH:-32}"
-THREADS="${THREADS:-2}"
+STEPS="${STEPS:-200}"
+WIDTH="${WIDTH:-128}"
+HEIGHT="${HEIGHT:-96}"
+NUM_DEPTH="${NUM_DEPTH:-24}"
+THREADS="${THREADS:-1}"
 VIEWS=12
 
 [ -x "$UMVS" ] || { echo "umvs not found at $UMVS (set UMVS=/path/to/umvs)" >&2; exit 1; }
@@ -61,9 +61,11 @@ for spec in "naive --loss naive" "first_order --loss first-order" "robust_k1 --l
 done
 seconds=$(( $(date +%s) - start ))
 
-row() {  # label name -> markdown row from eval.csv
-  tail -n 1 "$WORK/$2/eval/eval.csv" | awk -F, -v label="$1" \
-    '{ printf "| %s | %.4f | %.4f | %.3f | %.3f | %.1f |\n", label, $3, $4, $7, $9, 100 * $10 }'
+row() {  # label name -> markdown row from eval.csv (columns found by name)
+  awk -F, -v label="$1" '
+    NR == 1 { for (i = 1; i <= NF; ++i) col[$i] = i; next }
+    { printf "| %s | %.4f | %.4f | %.3f | %.3f | %.1f |\n", label, $col["photometric"], $col["ssim"],
+             $col["abs_err"], $col["abs_rel"], 100 * $col["within_1pct"] }' "$WORK/$2/eval/eval.csv"
 }
 {
   echo "| loss (held-out scenes) | photometric | SSIM | mean abs err (m) | abs rel | within 1% (%) |"
