@@ -1,0 +1,201 @@
+// Training pieces (core/training.h, io/training_data.h) and `umvs train`, on synthetic scenes with
+// exact depth (core/synth.h) written as MVSNet folders.
+#include <gtest/gtest.h>
+#include <torch/torch.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+
+#include "test_util.h"
+#include "unsup_mvs/core/synth.h"
+#include "unsup_mvs/core/training.h"
+#include "unsup_mvs/io/checkpoint.h"
+#include "unsup_mvs/io/image_io.h"
+#include "unsup_mvs/io/synth_writer.h"
+#include "unsup_mvs/io/training_data.h"
+
+namespace umvs {
+namespace {
+
+std::string write_scene(const std::string& name, int width, int height, int views, uint64_t seed = 1) {
+  const std::string dir = test::temp_dir(name);
+  SynthConfig cfg;
+  cfg.scene = SynthSceneType::kRoom;
+  cfg.seed = seed;
+  cfg.num_views = views;
+  cfg.width = width;
+  cfg.height = height;
+  cfg.lighting_change = false;
+  cfg.supersample = 2;
+  cfg.gt_cloud_samples = 0;
+  write_synthetic_scene(dir, render_synthetic_scene(cfg), cfg);
+  return dir;
+}
+
+int run(const std::string& args) {
+  const std::string cmd = test::umvs_binary() + " train " + args + " > /dev/null 2>&1";
+  return std::system(cmd.c_str());
+}
+
+TEST(TrainingData, CroppedTuplesKeepGeometryConsistent) {
+  // With random zoom/crop (intrinsics and ground truth follow), the loss on the depth grid at the
+  // ground-truth depth is clearly below the loss at a wrong depth: images, cameras and depth agree.
+  const std::string dir = write_scene("tuples", 192, 160, 6);
+  TupleConfig cfg;
+  cfg.views_in = 3;
+  cfg.views_loss = 4;
+  cfg.width = 128;
+  cfg.height = 96;
+  cfg.jitter = 0.1;
+  MvsFolderSource source({dir}, cfg);
+  ASSERT_EQ(source.size(), 6u);
+  EXPECT_TRUE(source.has_ground_truth());
+  std::mt19937_64 rng(3);
+  for (int i = 0; i < 3; ++i) {
+    const auto t = source.tuple(i, &rng);
+    ASSERT_EQ(t.network_views.size(), 3u);
+    ASSERT_EQ(t.loss_views.size(), 4u);
+    ASSERT_TRUE(t.depth_gt.defined());
+    EXPECT_EQ(t.network_views[0].image.size(1), 128);
+    const auto b = make_training_batch({t}, 16, DepthSampling::kUniformDepth, torch::kCPU);
+    ASSERT_EQ(b.loss_ref.sizes(), (std::vector<int64_t>{1, 3, 24, 32}));
+    auto gt = b.depth_gt.clamp_min(0.1);
+    LossConfig lc;
+    lc.top_k = 2;
+    auto at = [&](const torch::Tensor& d) {
+      return unsupervised_loss(b.loss_ref, b.loss_src, b.K_ref, b.K_src, b.T_src_ref, d, lc).photometric.item<double>();
+    };
+    // The true depth is the minimum along the depth axis (the room's fine texture, occlusions and
+    // the 1/4-resolution grid keep it above zero).
+    const double l_gt = at(gt), l_far = at(gt * 1.15), l_near = at(gt * 0.87);
+    EXPECT_LT(l_gt, 0.85 * std::min(l_far, l_near)) << t.name << ": at GT " << l_gt << ", x1.15 " << l_far << ", x0.87 " << l_near;
+  }
+  // Deterministic (no rng) tuples are centre crops and repeatable.
+  const auto a = source.tuple(2, nullptr), c = source.tuple(2, nullptr);
+  EXPECT_TRUE(torch::equal(a.network_views[0].image, c.network_views[0].image));
+  TupleConfig bad = cfg;
+  bad.views_loss = 9;
+  EXPECT_THROW(MvsFolderSource({dir}, bad), std::runtime_error);
+  bad = cfg;
+  bad.width = 100;
+  EXPECT_THROW(MvsFolderSource({dir}, bad), std::invalid_argument);
+}
+
+TEST(Training, ShortRunFromRandomWeightsReducesDepthError) {
+  // 160x128 input, 32 planes, a single room scene without lighting change, robust loss.
+  const std::string dir = write_scene("learn", 160, 128, 8, 4);
+  TupleConfig dcfg;
+  dcfg.views_in = 3;
+  dcfg.views_loss = 4;
+  dcfg.width = 160;
+  dcfg.height = 128;
+  dcfg.max_zoom = 1.0;
+  dcfg.jitter = 0.0;
+  MvsFolderSource source({dir}, dcfg);
+  std::vector<TrainingTuple> eval_tuples;
+  for (size_t i = 0; i < source.size(); ++i) eval_tuples.push_back(source.tuple(i, nullptr));
+
+  torch::manual_seed(0);
+  MvsNetConfig mcfg;
+  mcfg.num_depth = 32;
+  TrainerConfig tcfg;
+  tcfg.num_depth = 32;
+  tcfg.loss.top_k = 2;
+  Trainer trainer(MvsNet(mcfg), torch::kCPU, tcfg);
+  // The untrained network (eval mode, as the trained one is evaluated) predicts a nearly
+  // uniform distribution, i.e. depths near the middle of the range.
+  const auto before = trainer.evaluate(eval_tuples);
+  TupleSampler sampler(source, 1);
+  const int steps = 150;
+  double first_loss = 0, last_loss = 0;
+  for (int s = 0; s < steps; ++s) {
+    const auto v = trainer.step({sampler.next(false)});
+    ASSERT_TRUE(std::isfinite(v.total)) << "step " << s;
+    if (s < 16) first_loss += v.total / 16;
+    if (s >= steps - 16) last_loss += v.total / 16;
+  }
+  const auto after = trainer.evaluate(eval_tuples);
+  std::cout << "training loss " << first_loss << " -> " << last_loss << "; depth |err| " << before.depth.mean_abs
+            << " -> " << after.depth.mean_abs << " m; within 1% " << before.depth.within_1pct << " -> "
+            << after.depth.within_1pct << "\n";
+  ASSERT_GT(after.depth.pixels, 1000);
+  EXPECT_LT(last_loss, 0.8 * first_loss);
+  EXPECT_LT(after.depth.mean_abs, 0.6 * before.depth.mean_abs);
+  EXPECT_LT(after.loss.photometric, before.loss.photometric);
+}
+
+double checkpoint_metric(const std::string& path, const std::string& key) {
+  return load_model(path, torch::kCPU).meta.metrics.at(key);
+}
+
+TEST(TrainCommand, ResumeContinuesBitForBitAndKeepsTheBestModel) {
+  const std::string data = write_scene("resume", 96, 64, 5, 2);
+  const std::string out = test::temp_dir("resume_out");
+  const std::string common = "--data " + data + " --val " + data +
+                             " --width 96 --height 64 --num-depth 8 --views-loss 3 --top-k 2 --threads 1 --save-every 2";
+  ASSERT_EQ(run(common + " --out " + out + "/a --steps 4"), 0);
+  ASSERT_EQ(run(common + " --out " + out + "/b --steps 2"), 0);
+  ASSERT_EQ(run(common + " --out " + out + "/b --steps 4 --resume"), 0);
+  auto a = load_model(out + "/a/last.pt", torch::kCPU), b = load_model(out + "/b/last.pt", torch::kCPU);
+  EXPECT_EQ(a.meta.step, 4);
+  EXPECT_EQ(b.meta.step, 4);
+  EXPECT_EQ(a.meta.optimizer_state, b.meta.optimizer_state);
+  auto pa = a.model->named_parameters(), pb = b.model->named_parameters();
+  ASSERT_EQ(pa.size(), pb.size());
+  for (const auto& item : pa) EXPECT_TRUE(torch::equal(item.value(), pb[item.key()])) << item.key();
+  auto ba = a.model->named_buffers(), bb = b.model->named_buffers();
+  for (const auto& item : ba) EXPECT_TRUE(torch::equal(item.value(), bb[item.key()])) << item.key();
+
+  // The log has one row per step (the resumed run continues it) and validation at steps 2 and 4.
+  std::ifstream log(out + "/b/train_log.csv");
+  std::string line;
+  std::vector<std::string> lines;
+  while (std::getline(log, line)) lines.push_back(line);
+  ASSERT_EQ(lines.size(), 5u);
+  EXPECT_EQ(lines[0].substr(0, 11), "step,total,");
+  // best.pt holds the lowest validation score seen, last.pt the latest.
+  const double best = checkpoint_metric(out + "/b/best.pt", "score");
+  EXPECT_LE(best, checkpoint_metric(out + "/b/last.pt", "score"));
+  EXPECT_DOUBLE_EQ(best, checkpoint_metric(out + "/b/last.pt", "best_score"));
+  const auto png = read_image_rgb8(out + "/b/loss_curve.png");
+  EXPECT_GT((png != 255).any(2).sum().item<int64_t>(), 500);  // something was drawn
+
+  // --steps 0 writes the initial model (a baseline) and its validation.
+  ASSERT_EQ(run(common + " --out " + out + "/c --steps 0"), 0);
+  EXPECT_EQ(load_model(out + "/c/best.pt", torch::kCPU).meta.step, 0);
+  EXPECT_TRUE(std::filesystem::exists(out + "/c/last.pt"));
+  // --eval-only reports the held-out loss of a checkpoint.
+  ASSERT_EQ(run("--data " + data + " --width 96 --height 64 --num-depth 8 --views-loss 3 --threads 1 --eval-only " +
+                out + "/a/last.pt --out " + out + "/e"),
+            0);
+  EXPECT_TRUE(std::filesystem::exists(out + "/e/eval.csv"));
+  // Bad input: unknown loss, top-K above M, resume without a checkpoint. Nothing is overwritten.
+  EXPECT_NE(run(common + " --out " + out + "/a --steps 4 --loss fancy"), 0);
+  EXPECT_NE(run(common + " --out " + out + "/a --steps 4 --top-k 5"), 0);
+  EXPECT_NE(run(common + " --out " + out + "/d --steps 4 --resume"), 0);
+  EXPECT_EQ(load_model(out + "/a/last.pt", torch::kCPU).meta.step, 4);
+}
+
+TEST(Training, LossCurveAndDepthErrors) {
+  CurveSeries s;
+  for (int i = 0; i < 100; ++i) s.x.push_back(i), s.y.push_back(1.0 / (1 + i));
+  s.r = 255;
+  const auto img = render_curves({s}, 200, 100);
+  ASSERT_EQ(img.sizes(), (std::vector<int64_t>{100, 200, 3}));
+  // Red pixels from the curve: high on the left, low on the right.
+  auto red = (img.select(2, 0) == 255) & (img.select(2, 1) == 0);
+  EXPECT_GT(red.sum().item<int64_t>(), 100);
+  auto rows = torch::arange(100).view({100, 1}).expand({100, 200});
+  const double left = rows.slice(1, 60, 80).masked_select(red.slice(1, 60, 80)).to(torch::kFloat64).mean().item<double>();
+  const double right = rows.slice(1, 170, 190).masked_select(red.slice(1, 170, 190)).to(torch::kFloat64).mean().item<double>();
+  EXPECT_LT(left, right);
+
+  const auto e = depth_errors(torch::tensor({{1.0f, 2.0f, 3.0f, 5.0f}}), torch::tensor({{1.005f, 2.5f, 0.0f, 4.0f}}));
+  EXPECT_EQ(e.pixels, 3);
+  EXPECT_NEAR(e.mean_abs, (0.005 + 0.5 + 1.0) / 3, 1e-6);
+  EXPECT_NEAR(e.within_1pct, 1.0 / 3, 1e-9);
+}
+
+}  // namespace
+}  // namespace umvs
