@@ -1,0 +1,71 @@
+// The trainer node: fine-tunes the network on recorded bags without ground truth, on request.
+//
+// FineTune (~fine_tune) validates the request (bags exist and are readable, output inside
+// ~output_dir, one job at a time) and runs `umvs train --bag ...` as a child process (an argument
+// list, never a shell). While it runs, ~progress (TrainingProgress) reports step, loss terms and
+// ETA from the job's train_log.csv. When training ends, the new and the served model are both
+// evaluated on the same held-out keyframes (`umvs train --eval-only`); only if the new model's
+// photometric loss is lower is it copied to the output path and the inference nodelet's
+// reload_model service called. A crash or kill of the child touches neither inference nor fusion.
+#pragma once
+
+#include <ros/ros.h>
+#include <std_srvs/Trigger.h>
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "unsup_mvs/FineTune.h"
+#include "unsup_mvs/TrainingProgress.h"
+#include "unsup_mvs/io/child_process.h"
+
+namespace umvs_ros {
+
+class Trainer {
+ public:
+  Trainer(ros::NodeHandle nh, ros::NodeHandle pnh);
+
+ private:
+  enum class Phase { kIdle, kTraining, kEvaluatingNew, kEvaluatingServed };
+
+  bool on_fine_tune(unsup_mvs::FineTune::Request& req, unsup_mvs::FineTune::Response& res);
+  bool on_cancel(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
+  bool on_status(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
+  void on_timer(const ros::TimerEvent&);
+
+  std::vector<std::string> data_args() const;  // --bag ... and the topic/size options
+  void start_evaluation(const std::string& checkpoint, const std::string& out_dir, Phase phase);
+  void finish_job();
+  void publish(const std::string& state, const std::string& message);
+  void read_training_log();
+
+  ros::NodeHandle nh_, pnh_;
+  ros::ServiceServer fine_tune_srv_, cancel_srv_, status_srv_;
+  ros::Publisher progress_pub_;
+  ros::Timer timer_;
+
+  // parameters
+  std::string umvs_path_, output_dir_, served_checkpoint_, reload_service_;
+  std::string image_topic_, camera_info_topic_, world_frame_;
+  int default_steps_ = 500;
+  std::vector<std::string> extra_train_args_;
+
+  // the current job
+  Phase phase_ = Phase::kIdle;
+  umvs::ChildProcess child_;
+  std::string job_id_, job_dir_, output_path_, init_checkpoint_;
+  std::vector<std::string> bags_;
+  unsup_mvs::TrainingProgress last_;
+  double new_loss_ = 0.0;
+  ros::WallTime started_;
+};
+
+// Reads the photometric loss from an eval.csv written by `umvs train --eval-only ... --out DIR`.
+// Returns false when the file is missing or malformed.
+bool read_eval_photometric(const std::string& eval_csv, double* photometric);
+
+// True when `path` (which need not exist) lies inside `dir` after resolving '..' and links.
+bool path_inside(const std::string& path, const std::string& dir);
+
+}  // namespace umvs_ros
