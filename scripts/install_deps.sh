@@ -26,6 +26,8 @@ PACKAGES=(
   librosbag-dev librosbag-storage-dev
   # ROS 1 runtime tools: master, roslaunch, rostest, rosbag play
   ros-core python3-rostest librostest-dev rosbash
+  # the `nodelet` executable (manager / load) that launch/pipeline.launch runs
+  libnodeletlib-tools
 )
 if [[ "${1:-}" == "--viz" ]]; then
   PACKAGES+=(rviz xvfb)

@@ -9,6 +9,8 @@
 
 #include <cmath>
 #include <filesystem>
+#include <iterator>
+#include <map>
 #include <stdexcept>
 
 #include "unsup_mvs/io/bag_messages.h"
@@ -103,22 +105,26 @@ BagReadStats for_each_posed_image(const std::string& path, const BagTopics& topi
         }
       }
     }
-    // Pass 2: images with the latest camera info.
-    rosbag::View view(bag, rosbag::TopicQuery(std::vector<std::string>{topics.image, topics.camera_info}));
-    sensor_msgs::CameraInfo::ConstPtr info;
+    // Camera infos by stamp: an image uses the latest one at or before its stamp (messages of one
+    // stamp may be stored in any order), or the first one when it precedes them all.
+    std::map<ros::Time, sensor_msgs::CameraInfo::ConstPtr> infos;
+    rosbag::View info_view(bag, rosbag::TopicQuery(topics.camera_info));
+    for (const rosbag::MessageInstance& m : info_view) {
+      if (auto i = m.instantiate<sensor_msgs::CameraInfo>()) infos[i->header.stamp] = i;
+    }
+    // Pass 2: images.
+    rosbag::View view(bag, rosbag::TopicQuery(topics.image));
     for (const rosbag::MessageInstance& m : view) {
-      if (m.getTopic() == topics.camera_info) {
-        if (auto i = m.instantiate<sensor_msgs::CameraInfo>()) info = i;
-        continue;
-      }
       auto img = m.instantiate<sensor_msgs::Image>();
       if (!img) continue;
       ++stats.images;
-      if (!info) {
+      if (infos.empty()) {
         ++stats.without_info;
-        note("image before any CameraInfo on " + topics.camera_info);
+        note("no CameraInfo on " + topics.camera_info);
         continue;
       }
+      auto it = infos.upper_bound(img->header.stamp);
+      const sensor_msgs::CameraInfo::ConstPtr info = it == infos.begin() ? it->second : std::prev(it)->second;
       const std::string frame = img->header.frame_id.empty() ? topics.camera_frame : img->header.frame_id;
       PosedImage out;
       out.stamp = img->header.stamp.toSec();

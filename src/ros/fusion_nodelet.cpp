@@ -105,7 +105,7 @@ class FusionNodelet : public nodelet::Nodelet {
         if (view.color.size(0) != view.depth.size(0) || view.color.size(1) != view.depth.size(1)) view.color = torch::Tensor();
       }
     } catch (const std::exception& e) {
-      NODELET_ERROR_THROTTLE(5.0, "fusion: depth estimate %u skipped: %s", msg->keyframe_id, e.what());
+      NODELET_ERROR_THROTTLE(2.0, "fusion: depth estimate %u skipped: %s", msg->keyframe_id, e.what());
       return;
     }
     std::lock_guard<std::mutex> lock(mutex_);
@@ -118,11 +118,11 @@ class FusionNodelet : public nodelet::Nodelet {
       }
       last_stamp_ = msg->header.stamp;
       dirty_ = dirty_ || !added.empty();
-      NODELET_INFO_THROTTLE(5.0, "fusion: depth estimate %u added %zu points in %.2f s; %zu points from %ld estimates",
+      NODELET_INFO_THROTTLE(2.0, "fusion: depth estimate %u added %zu points in %.2f s; %zu points from %ld estimates",
                             msg->keyframe_id, added.size(), (ros::WallTime::now() - t0).toSec(), fusion_->cloud().size(),
                             estimates_);
     } catch (const std::exception& e) {
-      NODELET_ERROR_THROTTLE(5.0, "fusion: depth estimate %u skipped: %s", msg->keyframe_id, e.what());
+      NODELET_ERROR_THROTTLE(2.0, "fusion: depth estimate %u skipped: %s", msg->keyframe_id, e.what());
     }
   }
 

@@ -135,7 +135,7 @@ class InferenceNodelet : public nodelet::Nodelet {
         process(*set);
       } catch (const std::exception& e) {
         ++failed_;
-        NODELET_ERROR_THROTTLE(5.0, "inference: keyframe set %u skipped: %s", set->reference_id, e.what());
+        NODELET_ERROR_THROTTLE(2.0, "inference: keyframe set %u skipped: %s", set->reference_id, e.what());
       }
     }
   }
@@ -185,7 +185,7 @@ class InferenceNodelet : public nodelet::Nodelet {
     const double latency = (ros::Time::now() - header.stamp).toSec();
     ++processed_;
     seconds_sum_ += total;
-    NODELET_INFO_THROTTLE(5.0, "inference: keyframe %u: %dx%d depth map in %.2f s (network %.2f s), %.2f s after the "
+    NODELET_INFO_THROTTLE(2.0, "inference: keyframe %u: %dx%d depth map in %.2f s (network %.2f s), %.2f s after the "
                           "image; %ld done, %ld stale sets dropped, %ld failed",
                           set.reference_id, map.camera.width, map.camera.height, total, map.seconds, latency, processed_,
                           dropped_.load(), failed_.load());

@@ -96,7 +96,7 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
   void onImage(const sensor_msgs::ImageConstPtr& image, const sensor_msgs::CameraInfoConstPtr& info) {
     std::lock_guard<std::mutex> lock(mutex_);
     if (!umvs::is_supported_image_encoding(image->encoding)) {
-      NODELET_ERROR_THROTTLE(5.0, "keyframe_selector: image encoding '%s' is not supported (use rgb8, bgr8, rgba8, "
+      NODELET_ERROR_THROTTLE(2.0, "keyframe_selector: image encoding '%s' is not supported (use rgb8, bgr8, rgba8, "
                              "bgra8, mono8 or mono16); frame skipped", image->encoding.c_str());
       return;
     }
@@ -104,11 +104,11 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
     try {
       camera = umvs::camera_from_info(*info, rectified_);
     } catch (const std::exception& e) {
-      NODELET_ERROR_THROTTLE(5.0, "keyframe_selector: bad camera_info: %s; frame skipped", e.what());
+      NODELET_ERROR_THROTTLE(2.0, "keyframe_selector: bad camera_info: %s; frame skipped", e.what());
       return;
     }
     if (image->width != info->width || image->height != info->height) {
-      NODELET_ERROR_THROTTLE(5.0, "keyframe_selector: image is %ux%u but camera_info says %ux%u; frame skipped",
+      NODELET_ERROR_THROTTLE(2.0, "keyframe_selector: image is %ux%u but camera_info says %ux%u; frame skipped",
                              image->width, image->height, info->width, info->height);
       return;
     }
@@ -117,7 +117,7 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
     try {
       tf = tf_buffer_->lookupTransform(world_frame_, camera_frame, image->header.stamp, ros::Duration(tf_timeout_));
     } catch (const tf2::TransformException& e) {
-      NODELET_WARN_THROTTLE(5.0, "keyframe_selector: no transform %s -> '%s' at %.3f: %s; frame skipped",
+      NODELET_WARN_THROTTLE(2.0, "keyframe_selector: no transform %s -> '%s' at %.3f: %s; frame skipped",
                             world_frame_.c_str(), camera_frame.c_str(), image->header.stamp.toSec(), e.what());
       return;
     }
@@ -130,7 +130,7 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
       camera.T_cam_world = umvs::pose_to_matrix(pose).inverse();
       camera.validate("camera pose");
     } catch (const std::exception& e) {
-      NODELET_ERROR_THROTTLE(5.0, "keyframe_selector: invalid pose of '%s' in '%s' at %.3f: %s; frame skipped",
+      NODELET_ERROR_THROTTLE(2.0, "keyframe_selector: invalid pose of '%s' in '%s' at %.3f: %s; frame skipped",
                              camera_frame.c_str(), world_frame_.c_str(), image->header.stamp.toSec(), e.what());
       return;
     }

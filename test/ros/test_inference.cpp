@@ -149,6 +149,7 @@ TEST_F(InferenceTest, BadSetsAreLoggedAndSkipped) {
   subscribe();
   std::string message;
   ASSERT_TRUE(reload(dir_ + "/model.pt", &message)) << message;
+  ros::WallDuration(2.2).sleep();  // errors are throttled to one per 2 s
 
   auto wrong_encoding = make_set(20);
   wrong_encoding.reference_image.encoding = "32FC1";
@@ -157,11 +158,13 @@ TEST_F(InferenceTest, BadSetsAreLoggedAndSkipped) {
   keyframes_pub_.publish(wrong_encoding);
   EXPECT_TRUE(log.wait_for("unsupported image encoding '32FC1'", 10.0)) << log.all();
 
+  ros::WallDuration(2.2).sleep();  // errors are throttled to one per 2 s
   auto nan_pose = make_set(21);
   nan_pose.source_poses[1].orientation.w = std::nan("");
   keyframes_pub_.publish(nan_pose);
   EXPECT_TRUE(log.wait_for("pose has non-finite values", 10.0)) << log.all();
 
+  ros::WallDuration(2.2).sleep();
   auto bad_range = make_set(22);
   bad_range.depth_min = 3.0f;
   bad_range.depth_max = 1.0f;

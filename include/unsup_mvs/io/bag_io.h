@@ -59,13 +59,13 @@ class BagWriter {
 struct BagReadStats {
   size_t images = 0;          // image messages on the topic
   size_t used = 0;            // delivered to the callback
-  size_t without_info = 0;    // no CameraInfo seen before the image
+  size_t without_info = 0;    // no CameraInfo on the info topic at all
   size_t without_pose = 0;    // no transform world_frame -> camera at the image stamp
   size_t invalid = 0;         // unsupported encoding, bad calibration, NaN pose...
   std::string first_error;    // the first of those problems, for the user
 };
 
-// Calls `on_image` for every image that has a CameraInfo (the latest one on the info topic) and a
+// Calls `on_image` for every image that has a CameraInfo (the latest at or before its stamp) and a
 // pose (tf at the image stamp, interpolated); images without them are counted in `stats` and
 // skipped. `rectified` as in camera_from_info. `on_image` returns false to stop early. Throws
 // std::runtime_error naming the file when the bag cannot be opened or read.
