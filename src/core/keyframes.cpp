@@ -63,14 +63,14 @@ const Keyframe* KeyframeBuffer::find(int64_t id) const {
   return nullptr;
 }
 
-std::vector<ScoredView> KeyframeBuffer::select_sources(int64_t reference_id, double depth) const {
+std::vector<KeyframeScore> KeyframeBuffer::select_sources(int64_t reference_id, double depth) const {
   const Keyframe* ref = find(reference_id);
   if (!ref) throw std::invalid_argument("keyframe " + std::to_string(reference_id) + " is not buffered");
   if (!(depth > 0)) throw std::invalid_argument("select_sources: depth must be > 0");
   return select_sources(reference_id, sample_frustum_points(ref->camera, depth, config_.score_grid));
 }
 
-std::vector<ScoredView> KeyframeBuffer::select_sources(int64_t reference_id,
+std::vector<KeyframeScore> KeyframeBuffer::select_sources(int64_t reference_id,
                                                        const std::vector<Eigen::Vector3d>& points) const {
   const Keyframe* ref = find(reference_id);
   if (!ref) throw std::invalid_argument("keyframe " + std::to_string(reference_id) + " is not buffered");
@@ -81,10 +81,10 @@ std::vector<ScoredView> KeyframeBuffer::select_sources(int64_t reference_id,
     cameras.push_back(k.camera);
     ids.push_back(k.id);
   }
-  std::vector<ScoredView> best;
+  std::vector<KeyframeScore> best;
   for (const ScoredView& s : rank_source_views(points, ref->camera, cameras, config_.score)) {
     if (s.score < config_.min_score || static_cast<int>(best.size()) >= config_.num_sources) break;
-    best.push_back({static_cast<int>(ids[s.index]), s.score});
+    best.push_back({ids[s.index], s.score});
   }
   return best;
 }

@@ -162,8 +162,8 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
     set.reference_info = *info;
     set.reference_pose = pose;
     for (const auto& s : sources) {
-      const StoredFrame& f = frames_by_id_.at(s.index);
-      set.source_ids.push_back(static_cast<uint32_t>(s.index));
+      const StoredFrame& f = frames_by_id_.at(s.id);
+      set.source_ids.push_back(static_cast<uint32_t>(s.id));
       set.source_images.push_back(*f.image);
       set.source_infos.push_back(*f.info);
       set.source_poses.push_back(f.pose);

@@ -47,6 +47,11 @@ struct Keyframe {
   Camera camera;
 };
 
+struct KeyframeScore {
+  int64_t id = 0;      // keyframe id
+  double score = 0.0;  // MVSNet view-selection score against the reference
+};
+
 class KeyframeBuffer {
  public:
   explicit KeyframeBuffer(KeyframeConfig config = {});
@@ -59,9 +64,9 @@ class KeyframeBuffer {
 
   // The best `num_sources` buffered keyframes for `reference_id` (best first), scored on points
   // sampled at `depth` in its frustum. Fewer when not enough keyframes score >= min_score.
-  std::vector<ScoredView> select_sources(int64_t reference_id, double depth) const;
+  std::vector<KeyframeScore> select_sources(int64_t reference_id, double depth) const;
   // The same against surface points that are known (e.g. from a previous depth map).
-  std::vector<ScoredView> select_sources(int64_t reference_id, const std::vector<Eigen::Vector3d>& points) const;
+  std::vector<KeyframeScore> select_sources(int64_t reference_id, const std::vector<Eigen::Vector3d>& points) const;
 
   const Keyframe* find(int64_t id) const;  // nullptr when not (or no longer) buffered
   const std::deque<Keyframe>& keyframes() const { return keyframes_; }
