@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "unsup_mvs/core/device.h"
+#include "unsup_mvs/core/fusion.h"
 #include "unsup_mvs/core/geometry.h"
 #include "unsup_mvs/core/mvsnet.h"
 #include "unsup_mvs/io/checkpoint.h"
@@ -53,6 +54,72 @@ std::vector<Camera> bench_cameras(int width, int height, int views) {
   return cams;
 }
 
+// Fusion case: one reference and `sources` source views on an arc (+-15 degrees) 2 m from a
+// slanted plane that fills every image, so every pixel is an estimate (the worst case). Each run
+// fuses every view against all the others; reports seconds per reference view and points/s.
+int bench_fusion(const Args& args, const torch::Device& device) {
+  const int W = args.integer("width"), H = args.integer("height"), S = args.integer("sources");
+  const int runs = args.integer("runs");
+  if (S < 1) throw std::invalid_argument("--sources must be >= 1");
+  const Eigen::Vector3d n = Eigen::Vector3d(0.2, -0.3, 1.0).normalized();  // plane n.X = 0 through the origin
+  std::vector<FusionView> views;
+  for (int i = 0; i <= S; ++i) {
+    const double a = (S == 0 ? 0.0 : (2.0 * i / S - 1.0)) * 15.0 * M_PI / 180.0;
+    const Eigen::Vector3d eye(2.0 * std::sin(a), 0.1 * std::cos(3 * a), -2.0 * std::cos(a));
+    const Eigen::Vector3d f = (-eye).normalized();
+    const Eigen::Vector3d r = Eigen::Vector3d::UnitY().cross(f).normalized();
+    Eigen::Matrix3d R;
+    R.row(0) = r;
+    R.row(1) = f.cross(r);
+    R.row(2) = f;
+    FusionView v;
+    v.id = i;
+    v.camera.width = W;
+    v.camera.height = H;
+    v.camera.K << 0.9 * W, 0, (W - 1) / 2.0, 0, 0.9 * W, (H - 1) / 2.0, 0, 0, 1;
+    v.camera.T_cam_world.topLeftCorner<3, 3>() = R;
+    v.camera.T_cam_world.topRightCorner<3, 1>() = -R * eye;
+    // z-depth along each pixel ray d (camera z = 1): eye + s d on the plane -> s = -n.eye / n.d
+    const Eigen::Vector3d m = (R.transpose() * v.camera.K.inverse()).transpose() * n;  // n.d = m.(x, y, 1)
+    auto xs = torch::arange(W, torch::kFloat64).view({1, W}), ys = torch::arange(H, torch::kFloat64).view({H, 1});
+    v.depth = (-n.dot(eye) / (m.x() * xs + m.y() * ys + m.z())).to(torch::kFloat32);
+    v.confidence = torch::ones_like(v.depth);
+    v.color = torch::full({H, W, 3}, 128, torch::kUInt8);
+    views.push_back(v);
+  }
+  FusionConfig cfg;
+  cfg.max_source_views = S;
+  DepthFusion fusion(cfg, device);
+  std::vector<double> per_view, rates;
+  size_t points = 0;
+  for (int r = 0; r < args.integer("warmup") + runs; ++r) {
+    std::vector<FusionViewStats> stats;
+    const auto t0 = std::chrono::steady_clock::now();
+    points = fusion.fuse(views, {}, &stats).size();
+    const double total = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    if (r < args.integer("warmup")) continue;
+    per_view.push_back(total / views.size());
+    rates.push_back(points / total);
+  }
+  const auto s = summarize(per_view);
+  std::sort(rates.begin(), rates.end());
+  const double rate = rates[rates.size() / 2];
+  std::ostringstream device_name;
+  device_name << device;
+  if (args.on("json")) {
+    std::cout << std::setprecision(6) << "{\"case\": \"fusion\", \"width\": " << W << ", \"height\": " << H << ", \"sources\": " << S
+              << ", \"threads\": " << torch::get_num_threads() << ", \"device\": \"" << device_name.str() << "\", \"runs\": " << s.runs
+              << ", \"median_s_per_view\": " << s.median << ", \"min_s\": " << s.min << ", \"max_s\": " << s.max
+              << ", \"points_per_s\": " << rate << ", \"points\": " << points << ", \"peak_rss_mib\": " << peak_rss_mib() << "}\n";
+  } else {
+    std::cout << std::fixed << std::setprecision(3) << "fusion " << W << "x" << H << " reference, " << S << " sources, device="
+              << device_name.str() << " threads=" << torch::get_num_threads() << ": median " << s.median << " s per reference view (min "
+              << s.min << ", max " << s.max << ", " << s.runs << " runs of " << views.size() << " views), " << std::setprecision(0)
+              << rate << " points/s (" << points << " points per run), peak RSS " << peak_rss_mib() << " MiB\n";
+  }
+  return 0;
+}
+
 }  // namespace
 }  // namespace umvs
 
@@ -61,11 +128,12 @@ UMVS_COMMAND(bench, "time and memory of the network on synthetic input") {
                   "Times forward passes of MVSNet on random images (random weights unless --checkpoint):\n"
                   "median/min/max seconds per depth map over --runs runs after --warmup runs, achieved\n"
                   "GFLOP/s (convolutions) and peak memory (process RSS on CPU, allocator peak on CUDA).");
-  args.option("case", "network", "what to time: network")
+  args.option("case", "network", "what to time: network | fusion")
       .option("width", "640", "image width (multiple of 32)")
       .option("height", "512", "image height (multiple of 32)")
       .option("num-depth", "128", "depth hypotheses")
       .option("views", "3", "views per depth map")
+      .option("sources", "10", "fusion: source views per reference")
       .option("threads", "2", "CPU threads")
       .option("device", "cpu", "cpu | cuda")
       .option("runs", "5", "timed runs (>= 5 recommended)")
@@ -79,6 +147,7 @@ UMVS_COMMAND(bench, "time and memory of the network on synthetic input") {
   const int W = args.integer("width"), H = args.integer("height"), D = args.integer("num-depth"), V = args.integer("views");
   const int runs = args.integer("runs");
   if (runs < 1) throw std::invalid_argument("--runs must be >= 1");
+  if (args.str("case") == "fusion") return umvs::bench_fusion(args, device);
   if (args.str("case") != "network") throw std::invalid_argument("unknown --case '" + args.str("case") + "'");
 
   umvs::MvsNetConfig cfg;

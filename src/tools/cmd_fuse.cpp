@@ -1,0 +1,206 @@
+// umvs fuse: depth maps of a scene -> one consistent coloured point cloud (binary PLY).
+#include <torch/torch.h>
+
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <map>
+#include <sstream>
+
+#include "unsup_mvs/core/device.h"
+#include "unsup_mvs/core/fusion.h"
+#include "unsup_mvs/core/image_ops.h"
+#include "unsup_mvs/io/array_io.h"
+#include "unsup_mvs/io/image_io.h"
+#include "unsup_mvs/io/mvs_folder.h"
+#include "unsup_mvs/io/ply.h"
+#include "unsup_mvs/tools/args.h"
+#include "unsup_mvs/tools/command.h"
+
+namespace fs = std::filesystem;
+
+namespace {
+
+// Where the depth maps, confidences, cameras, colours and pairs of a fusion come from.
+struct Layout {
+  std::string depth_dir, confidence_dir, cam_dir, image_dir, pair_file;
+};
+
+Layout find_layout(const std::string& depth, const std::string& data) {
+  Layout l;
+  auto need_data = [&](const std::string& what) {
+    if (data.empty()) throw std::invalid_argument("--depth " + depth + " has no " + what + ": give --data (the MVSNet folder)");
+    return data;
+  };
+  if (fs::is_directory(fs::path(depth) / "depth_est")) {  // written by `umvs infer`
+    l.depth_dir = depth + "/depth_est";
+    if (fs::is_directory(fs::path(depth) / "confidence")) l.confidence_dir = depth + "/confidence";
+    l.cam_dir = fs::is_directory(fs::path(depth) / "cams") ? depth + "/cams" : need_data("cams/") + "/cams";
+    l.image_dir = fs::is_directory(fs::path(depth) / "images") ? depth + "/images" : need_data("images/") + "/images";
+    l.pair_file = fs::exists(fs::path(depth) / "pair.txt") ? depth + "/pair.txt" : need_data("pair.txt") + "/pair.txt";
+  } else if (fs::is_directory(depth)) {  // a folder of XXXXXXXX.pfm, e.g. DATA/depth_gt
+    l.depth_dir = depth;
+    l.cam_dir = need_data("cams/") + "/cams";
+    l.image_dir = data + "/images";
+    l.pair_file = data + "/pair.txt";
+  } else {
+    throw std::invalid_argument("--depth '" + depth + "' is not a folder");
+  }
+  return l;
+}
+
+std::string find_image(const std::string& dir, int id) {
+  for (const char* ext : {".png", ".jpg", ".jpeg", ".PNG", ".JPG"}) {
+    const auto p = fs::path(dir) / (umvs::view_file_stem(id) + ext);
+    if (fs::exists(p)) return p.string();
+  }
+  throw std::runtime_error("no image for view " + std::to_string(id) + " in " + dir);
+}
+
+// Depth map, confidence, camera (rescaled to the depth map) and colours of one view.
+umvs::FusionView load_view(const Layout& l, int id) {
+  const std::string stem = umvs::view_file_stem(id);
+  umvs::FusionView v;
+  v.id = id;
+  v.depth = umvs::read_pfm(l.depth_dir + "/" + stem + ".pfm");
+  if (v.depth.dim() != 2) throw std::runtime_error(l.depth_dir + "/" + stem + ".pfm: expected a one-channel depth map");
+  const int H = static_cast<int>(v.depth.size(0)), W = static_cast<int>(v.depth.size(1));
+  if (!l.confidence_dir.empty() && fs::exists(l.confidence_dir + "/" + stem + ".pfm")) {
+    v.confidence = umvs::read_pfm(l.confidence_dir + "/" + stem + ".pfm");
+  }
+  const auto image = umvs::read_image_rgb8(find_image(l.image_dir, id));
+  umvs::Camera cam = umvs::read_cam_file(l.cam_dir + "/" + stem + "_cam.txt").camera;
+  cam.width = static_cast<int>(image.size(1));
+  cam.height = static_cast<int>(image.size(0));
+  if (cam.width != W || cam.height != H) {
+    // The cam file describes the image; the depth map is a scaled version of it.
+    cam = cam.resized(W, H);
+    v.color = umvs::float_to_rgb8(umvs::resize_image(umvs::rgb8_to_float(image), W, H));
+  } else {
+    v.color = image;
+  }
+  v.camera = cam;
+  return v;
+}
+
+std::vector<double> parse_bbox(const std::string& s) {
+  std::vector<double> b;
+  std::stringstream ss(s);
+  for (std::string item; std::getline(ss, item, ',');) b.push_back(std::stod(item));
+  if (b.size() != 6 || b[0] >= b[3] || b[1] >= b[4] || b[2] >= b[5]) {
+    throw std::invalid_argument("--bbox needs xmin,ymin,zmin,xmax,ymax,zmax with min < max, got '" + s + "'");
+  }
+  return b;
+}
+
+}  // namespace
+
+UMVS_COMMAND(fuse, "fuse depth maps into one consistent point cloud (PLY)") {
+  umvs::Args args("fuse",
+                  "Keeps the depth-map pixels that enough other views agree with (reprojection error and\n"
+                  "relative depth difference after a round trip, see docs/fusion.md) and writes them as one\n"
+                  "binary PLY with colour, confidence and agreeing-view count.\n"
+                  "--depth is either a folder written by `umvs infer` (depth_est/, confidence/, cams/,\n"
+                  "images/, pair.txt: --data is then optional) or a folder of XXXXXXXX.pfm depth maps such as\n"
+                  "DATA/depth_gt (cameras, images and pair.txt then come from --data; cameras are rescaled\n"
+                  "when the depth maps are smaller than the images).");
+  args.required("depth", "depth folder: `umvs infer` output or a folder of XXXXXXXX.pfm")
+      .option("data", "", "MVSNet-format folder for cams/images/pair.txt missing from --depth")
+      .required("out", "output PLY (written atomically; an existing file is kept when fusion fails)")
+      .option("min-confidence", "0.8", "pixels below this confidence are ignored")
+      .option("max-reprojection", "1.0", "max reprojection error after the round trip (pixels)")
+      .option("max-relative-depth", "0.01", "max relative depth difference")
+      .option("min-views", "3", "agreeing source views needed")
+      .option("max-sources", "10", "sources tested per reference (pair.txt order)")
+      .option("voxel", "0", "voxel edge for de-duplication in scene units (0 = off)")
+      .option("ref", "", "comma-separated view ids to fuse (default: all in pair.txt with a depth map)")
+      .flag("stream", "use the streaming fusion (views in pair.txt order, --window recent estimates)")
+      .option("window", "10", "with --stream: estimates kept in the ring")
+      .option("bbox", "", "xmin,ymin,zmin,xmax,ymax,zmax: also report the share of points inside")
+      .option("device", "cpu", "cpu | cuda | cuda:N")
+      .option("threads", "0", "CPU threads (0 = all cores)");
+  if (!args.parse(argc, argv)) return 0;
+  umvs::configure_threads(args.integer("threads"));
+  const auto device = umvs::parse_device(args.str("device"));
+  umvs::FusionConfig cfg;
+  cfg.min_confidence = args.real("min-confidence");
+  cfg.max_reprojection_px = args.real("max-reprojection");
+  cfg.max_relative_depth = args.real("max-relative-depth");
+  cfg.min_agreeing_views = args.integer("min-views");
+  cfg.max_source_views = args.integer("max-sources");
+  cfg.voxel_size = args.real("voxel");
+  cfg.validate();
+  const auto bbox = args.given("bbox") ? parse_bbox(args.str("bbox")) : std::vector<double>{};
+
+  const Layout layout = find_layout(args.str("depth"), args.str("data"));
+  if (!fs::exists(layout.pair_file)) throw std::runtime_error("no pair file " + layout.pair_file);
+  const auto pairs = umvs::read_pair_file(layout.pair_file);
+  std::vector<int> ids = args.integers("ref");
+  if (ids.empty()) {
+    for (const auto& p : pairs) {
+      if (fs::exists(layout.depth_dir + "/" + umvs::view_file_stem(p.ref) + ".pfm")) ids.push_back(p.ref);
+    }
+  }
+  if (ids.empty()) throw std::runtime_error("no depth maps (XXXXXXXX.pfm) for the views of " + layout.pair_file + " in " + layout.depth_dir);
+
+  const auto t_load = std::chrono::steady_clock::now();
+  std::vector<umvs::FusionView> views;
+  std::map<int, int> index_of;
+  for (int id : ids) {
+    index_of[id] = static_cast<int>(views.size());
+    views.push_back(load_view(layout, id));
+  }
+  // Sources from pair.txt, restricted to the views we have.
+  std::vector<std::vector<int>> sources(views.size());
+  for (const auto& p : pairs) {
+    auto it = index_of.find(p.ref);
+    if (it == index_of.end()) continue;
+    for (int s : p.sources) {
+      auto jt = index_of.find(s);
+      if (jt != index_of.end() && jt->second != it->second) sources[it->second].push_back(jt->second);
+    }
+  }
+  const double load_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_load).count();
+  std::cerr << "loaded " << views.size() << " depth maps (" << views[0].depth.size(1) << "x" << views[0].depth.size(0) << ") from "
+            << layout.depth_dir << " in " << load_s << " s; device " << device << ", " << torch::get_num_threads() << " threads\n";
+
+  const auto t0 = std::chrono::steady_clock::now();
+  umvs::PointCloud cloud;
+  if (args.on("stream")) {
+    umvs::StreamingFusion stream(cfg, args.integer("window"), size_t(1) << 40, device);
+    for (const auto& v : views) {
+      const auto t = std::chrono::steady_clock::now();
+      const size_t added = stream.add(v).size();
+      std::printf("view %8lld: %zu new points, %.3f s\n", static_cast<long long>(v.id), added,
+                  std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count());
+    }
+    cloud = stream.cloud();
+  } else {
+    std::vector<umvs::FusionViewStats> stats;
+    cloud = umvs::DepthFusion(cfg, device).fuse(views, sources, &stats);
+    for (const auto& s : stats) {
+      std::printf("view %8lld: %2d sources, %8lld valid px, %8lld points, %.3f s\n", static_cast<long long>(s.id), s.num_sources,
+                  static_cast<long long>(s.valid_pixels), static_cast<long long>(s.points), s.seconds);
+    }
+  }
+  const double fuse_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  std::printf("fused %zu views into %zu points in %.2f s (%.3f s per view)\n", views.size(), cloud.size(), fuse_s,
+              fuse_s / views.size());
+  if (!bbox.empty()) {
+    size_t inside = 0;
+    for (const auto& p : cloud.points) {
+      inside += p.x() >= bbox[0] && p.y() >= bbox[1] && p.z() >= bbox[2] && p.x() <= bbox[3] && p.y() <= bbox[4] && p.z() <= bbox[5];
+    }
+    std::printf("inside the bounding box: %zu of %zu points (%.1f%%)\n", inside, cloud.size(),
+                cloud.empty() ? 0.0 : 100.0 * inside / cloud.size());
+  }
+  if (cloud.empty()) {
+    std::cerr << "no point survived the consistency test: nothing written (loosen --min-views, --min-confidence, "
+                 "--max-reprojection or --max-relative-depth)\n";
+    return 1;
+  }
+  umvs::write_ply(args.str("out"), cloud);
+  std::printf("wrote %s\n", args.str("out").c_str());
+  return 0;
+}

@@ -1,0 +1,384 @@
+// Depth-map fusion on an analytic scene: a ground plane z = 0 with a sphere on it, seen by a ring
+// of cameras. Ground-truth depth maps are ray-cast here, so every fused point can be checked
+// against the exact surface.
+#include <gtest/gtest.h>
+#include <torch/torch.h>
+
+#include <cmath>
+#include <set>
+
+#include "unsup_mvs/core/fusion.h"
+
+namespace umvs {
+namespace {
+
+const Eigen::Vector3d kSphereCentre(0.0, 0.0, 0.3);
+const double kSphereRadius = 0.3;
+
+Camera look_at(const Eigen::Vector3d& centre, const Eigen::Vector3d& target, int w = 64, int h = 48) {
+  Camera c;
+  c.width = w;
+  c.height = h;
+  c.K << 60, 0, (w - 1) / 2.0, 0, 60, (h - 1) / 2.0, 0, 0, 1;
+  const Eigen::Vector3d f = (target - centre).normalized();
+  const Eigen::Vector3d r = f.cross(Eigen::Vector3d::UnitZ()).normalized();
+  const Eigen::Vector3d d = f.cross(r);
+  Eigen::Matrix3d R;
+  R.row(0) = r;
+  R.row(1) = d;
+  R.row(2) = f;
+  c.T_cam_world.topLeftCorner<3, 3>() = R;
+  c.T_cam_world.topRightCorner<3, 1>() = -R * centre;
+  return c;
+}
+
+// z-depth of the nearest surface (plane or sphere) for every pixel.  -> [H,W] float32
+torch::Tensor render_depth(const Camera& cam) {
+  const int H = cam.height, W = cam.width;
+  auto xs = torch::arange(W, torch::kFloat64).view({1, W}).expand({H, W});
+  auto ys = torch::arange(H, torch::kFloat64).view({H, 1}).expand({H, W});
+  const Eigen::Matrix3d M = cam.R().transpose() * cam.K.inverse();  // pixel -> world ray (camera z = 1)
+  auto ray = [&](int r) { return M(r, 0) * xs + M(r, 1) * ys + M(r, 2); };
+  auto dx = ray(0), dy = ray(1), dz = ray(2);
+  const Eigen::Vector3d C = cam.center();
+  const double inf = std::numeric_limits<double>::infinity();
+  auto s_plane = -C.z() / dz;
+  s_plane = torch::where(s_plane > 0, s_plane, torch::full_like(s_plane, inf));
+  const Eigen::Vector3d oc = C - kSphereCentre;
+  auto a = dx * dx + dy * dy + dz * dz;
+  auto b = 2 * (dx * oc.x() + dy * oc.y() + dz * oc.z());
+  const double c = oc.squaredNorm() - kSphereRadius * kSphereRadius;
+  auto disc = b * b - 4 * a * c;
+  auto s_sphere = (-b - torch::sqrt(disc.clamp_min(0))) / (2 * a);
+  s_sphere = torch::where((disc > 0) & (s_sphere > 0), s_sphere, torch::full_like(s_sphere, inf));
+  auto s = torch::minimum(s_plane, s_sphere);
+  return torch::where(torch::isfinite(s), s, torch::zeros_like(s)).to(torch::kFloat32);
+}
+
+// Distance of points [N,3] to the scene surface (plane z = 0 or sphere).  -> [N]
+torch::Tensor surface_distance(const torch::Tensor& pts) {
+  auto c = torch::tensor({kSphereCentre.x(), kSphereCentre.y(), kSphereCentre.z()}, torch::kFloat32);
+  auto d_sphere = ((pts - c).norm(2, 1) - kSphereRadius).abs();
+  auto d_plane = pts.select(1, 2).abs();
+  return torch::minimum(d_sphere, d_plane);
+}
+
+// Accuracy the fusion guarantees by construction: every point's depth is within
+// max_relative_depth (1%) of the reference depth, i.e. < 2.5 cm at the ~2.3 m of the farthest
+// pixels. Bilinear interpolation of the source depth (exact only for fronto-parallel surfaces)
+// and mixed depths at the sphere's silhouette average in a few millimetres at 64x48 pixels, so
+// the typical error is far smaller.
+void expect_accurate(const torch::Tensor& pts, double median = 2e-4, double p99 = 4e-3, double max = 0.025) {
+  ASSERT_GT(pts.size(0), 0);
+  auto err = surface_distance(pts);
+  EXPECT_LT(err.median().item<double>(), median);
+  EXPECT_LT(err.quantile(0.99).item<double>(), p99);
+  EXPECT_LT(err.max().item<double>(), max);
+}
+
+torch::Tensor to_tensor(const PointCloud& cloud) {
+  auto t = torch::empty({static_cast<int64_t>(cloud.size()), 3}, torch::kFloat32);
+  for (size_t i = 0; i < cloud.size(); ++i)
+    for (int k = 0; k < 3; ++k) t[i][k] = cloud.points[i][k];
+  return t;
+}
+
+std::vector<FusionView> ring_views(int n = 8) {
+  std::vector<FusionView> views;
+  for (int i = 0; i < n; ++i) {
+    const double a = 2.0 * M_PI * i / n * 0.5;  // half a ring: neighbours overlap well
+    FusionView v;
+    v.id = i;
+    v.camera = look_at({1.6 * std::cos(a), 1.6 * std::sin(a), 1.2}, {0, 0, 0.15});
+    v.depth = render_depth(v.camera);
+    views.push_back(v);
+  }
+  return views;
+}
+
+std::vector<std::vector<int>> all_others(size_t n) {
+  std::vector<std::vector<int>> s(n);
+  for (size_t i = 0; i < n; ++i)
+    for (size_t j = 0; j < n; ++j)
+      if (i != j) s[i].push_back(static_cast<int>(j));
+  return s;
+}
+
+// Share of `truth` points [M,3] with a cloud point within `tol`.
+double completeness(const torch::Tensor& cloud, const torch::Tensor& truth, double tol) {
+  auto d = torch::cdist(truth, cloud).amin(1);
+  return (d < tol).to(torch::kFloat64).mean().item<double>();
+}
+
+// Ground-truth surface samples: every 3rd pixel of every view, back-projected.
+torch::Tensor truth_points(const std::vector<FusionView>& views) {
+  std::vector<float> xyz;
+  for (const auto& v : views) {
+    auto d = v.depth.accessor<float, 2>();
+    for (int y = 1; y < v.camera.height; y += 3)
+      for (int x = 1; x < v.camera.width; x += 3)
+        if (d[y][x] > 0) {
+          const Eigen::Vector3d p = v.camera.backproject(x, y, d[y][x]);
+          xyz.insert(xyz.end(), {float(p.x()), float(p.y()), float(p.z())});
+        }
+  }
+  return torch::tensor(xyz).view({-1, 3});
+}
+
+TEST(DepthFusion, GroundTruthDepthGivesAnAccurateAndCompleteCloud) {
+  auto views = ring_views();
+  std::vector<FusionViewStats> stats;
+  DepthFusion fusion(FusionConfig{}, torch::kCPU);
+  auto cloud = fusion.fuse(views, {}, &stats);
+  ASSERT_GT(cloud.size(), 5000u);
+  ASSERT_EQ(stats.size(), views.size());
+  auto pts = to_tensor(cloud);
+  expect_accurate(pts);
+  // Most of what at least 4 views see is reconstructed: the outermost views of the half ring see
+  // parts of the plane no other 3 views see, so completeness is measured on the inner views.
+  auto truth = truth_points({views.begin() + 2, views.end() - 2});
+  EXPECT_GT(completeness(pts, truth, 0.01), 0.8);
+  ASSERT_EQ(cloud.num_views.size(), cloud.size());
+  ASSERT_EQ(cloud.confidence.size(), cloud.size());
+  for (size_t i = 0; i < cloud.size(); ++i) {
+    EXPECT_GE(cloud.num_views[i], 3);
+    EXPECT_LE(cloud.num_views[i], 7);
+    EXPECT_FLOAT_EQ(cloud.confidence[i], 1.0f);
+  }
+  int64_t total = 0;
+  for (const auto& s : stats) {
+    total += s.points;
+    EXPECT_LE(s.num_sources, 7);
+    EXPECT_GE(s.num_sources, 3);
+  }
+  EXPECT_EQ(total, static_cast<int64_t>(cloud.size()));
+}
+
+TEST(DepthFusion, ZeroRequiredViewsKeepsEveryValidPixel) {
+  auto views = ring_views(4);
+  views[1].depth[5][7] = std::numeric_limits<float>::quiet_NaN();
+  views[2].depth[0][0] = -1.0f;
+  int64_t valid = 0;
+  for (const auto& v : views) valid += (torch::isfinite(v.depth) & (v.depth > 0)).sum().item<int64_t>();
+  FusionConfig cfg;
+  cfg.min_agreeing_views = 0;
+  auto cloud = DepthFusion(cfg, torch::kCPU).fuse(views);
+  EXPECT_EQ(static_cast<int64_t>(cloud.size()), valid);
+  expect_accurate(to_tensor(cloud));
+}
+
+TEST(DepthFusion, ViewCountThresholdIsMonotoneAndHonoured) {
+  auto views = ring_views();
+  size_t previous = std::numeric_limits<size_t>::max();
+  for (int k : {1, 2, 3, 5, 7, 8}) {
+    FusionConfig cfg;
+    cfg.min_agreeing_views = k;
+    auto cloud = DepthFusion(cfg, torch::kCPU).fuse(views, all_others(views.size()));
+    EXPECT_LE(cloud.size(), previous) << "k=" << k;
+    previous = cloud.size();
+    for (auto n : cloud.num_views) ASSERT_GE(n, k);
+    if (k == 8) {
+      EXPECT_EQ(cloud.size(), 0u);  // only 7 other views exist
+    }
+    if (k == 7) {
+      EXPECT_GT(cloud.size(), 0u);  // the sphere top is seen by all
+    }
+  }
+}
+
+TEST(DepthFusion, CorruptedViewIsRemovedWhileTheOthersSurvive) {
+  auto views = ring_views();
+  std::vector<FusionViewStats> clean, offset, noisy;
+  DepthFusion fusion(FusionConfig{}, torch::kCPU);
+  fusion.fuse(views, all_others(views.size()), &clean);
+
+  auto corrupted = views;
+  corrupted[3].depth = views[3].depth * 1.05;  // 5% too far: about 10 cm
+  auto cloud = fusion.fuse(corrupted, all_others(views.size()), &offset);
+  // A handful of pixels where interpolated source depths happen to match may survive.
+  EXPECT_LT(offset[3].points, 0.01 * clean[3].points);
+  expect_accurate(to_tensor(cloud));
+  // The other views lose one possible witness but keep most points.
+  for (size_t i = 0; i < views.size(); ++i) {
+    if (i != 3) {
+      EXPECT_GT(offset[i].points, 0.7 * clean[i].points) << "view " << i;
+    }
+  }
+
+  torch::manual_seed(0);
+  corrupted[3].depth = views[3].depth * (1.0 + 0.05 * torch::randn_like(views[3].depth));
+  cloud = fusion.fuse(corrupted, all_others(views.size()), &noisy);
+  // Only pixels whose noise happens to be < 1% can agree with the others (about 16% of them).
+  EXPECT_LT(noisy[3].points, 0.3 * clean[3].points);
+  EXPECT_GT(noisy[3].points, 0.05 * clean[3].points);
+  // ... and those lie within 1% of the surface.
+  expect_accurate(to_tensor(cloud), 2e-4, 0.01);
+}
+
+TEST(DepthFusion, RelativeDepthThresholdDecides) {
+  auto views = ring_views();
+  views[3].depth = views[3].depth * 1.005;  // 0.5% too far
+  std::vector<FusionViewStats> loose, tight;
+  FusionConfig cfg;
+  DepthFusion(cfg, torch::kCPU).fuse(views, all_others(views.size()), &loose);
+  cfg.max_relative_depth = 0.002;
+  DepthFusion(cfg, torch::kCPU).fuse(views, all_others(views.size()), &tight);
+  EXPECT_GT(loose[3].points, 0.8 * loose[2].points);
+  EXPECT_LT(tight[3].points, 0.1 * loose[3].points);
+  EXPECT_GT(tight[2].points, 0.6 * loose[2].points);
+}
+
+TEST(DepthFusion, ReprojectionThresholdDecides) {
+  // View 3 20% too far, with the depth test switched off: a source reads the true surface where
+  // the wrong point projects, and that surface point lands several pixels (parallax) away.
+  auto views = ring_views();
+  views[3].depth = views[3].depth * 1.2;
+  std::vector<FusionViewStats> tight, loose;
+  FusionConfig cfg;
+  cfg.max_relative_depth = 1.0;  // isolate the pixel test
+  DepthFusion(cfg, torch::kCPU).fuse(views, all_others(views.size()), &tight);
+  cfg.max_reprojection_px = 20.0;
+  DepthFusion(cfg, torch::kCPU).fuse(views, all_others(views.size()), &loose);
+  EXPECT_LT(tight[3].points, 0.1 * tight[2].points);
+  EXPECT_GT(loose[3].points, 0.5 * loose[2].points);
+}
+
+TEST(DepthFusion, ConfidenceThresholdDropsUnsurePixels) {
+  auto views = ring_views();
+  for (auto& v : views) v.confidence = torch::ones_like(v.depth);
+  // View 0: left half 0.5, right half 0.9.
+  views[0].confidence.slice(1, 0, 32).fill_(0.5);
+  views[0].confidence.slice(1, 32, 64).fill_(0.9);
+  auto count_conf = [](const PointCloud& c, float value) {
+    return std::count_if(c.confidence.begin(), c.confidence.end(), [&](float x) { return std::abs(x - value) < 1e-6; });
+  };
+  FusionConfig cfg;  // 0.8
+  auto strict = DepthFusion(cfg, torch::kCPU).fuse(views);
+  EXPECT_EQ(count_conf(strict, 0.5f), 0);
+  EXPECT_GT(count_conf(strict, 0.9f), 100);
+  cfg.min_confidence = 0.4;
+  auto lax = DepthFusion(cfg, torch::kCPU).fuse(views);
+  EXPECT_GT(count_conf(lax, 0.5f), 100);
+  EXPECT_GT(lax.size(), strict.size());
+  cfg.min_confidence = 0.95;  // view 0 drops out entirely
+  auto none = DepthFusion(cfg, torch::kCPU).fuse(views);
+  EXPECT_EQ(count_conf(none, 0.9f) + count_conf(none, 0.5f), 0);
+}
+
+TEST(DepthFusion, VoxelGridRemovesDuplicates) {
+  auto views = ring_views();
+  FusionConfig cfg;
+  auto dense = DepthFusion(cfg, torch::kCPU).fuse(views);
+  cfg.voxel_size = 0.03;
+  auto sparse = DepthFusion(cfg, torch::kCPU).fuse(views);
+  EXPECT_LT(sparse.size(), dense.size() / 2);
+  std::set<std::tuple<int64_t, int64_t, int64_t>> cells;
+  for (const auto& p : sparse.points) {
+    auto cell = std::make_tuple(int64_t(std::floor(p.x() / 0.03)), int64_t(std::floor(p.y() / 0.03)), int64_t(std::floor(p.z() / 0.03)));
+    EXPECT_TRUE(cells.insert(cell).second) << "two points in one voxel";
+  }
+  // Still covers the scene at voxel resolution.
+  EXPECT_GT(completeness(to_tensor(sparse), to_tensor(dense), 0.03), 0.95);
+}
+
+TEST(DepthFusion, RejectsBadInput) {
+  auto views = ring_views(3);
+  views[1].camera.width = 32;
+  try {
+    DepthFusion(FusionConfig{}, torch::kCPU).fuse(views);
+    FAIL() << "expected an error";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("view 1"), std::string::npos) << e.what();
+  }
+  views = ring_views(3);
+  EXPECT_THROW(DepthFusion(FusionConfig{}, torch::kCPU).fuse(views, {{1}, {0}}), std::invalid_argument);
+  EXPECT_THROW(DepthFusion(FusionConfig{}, torch::kCPU).fuse(views, {{0}, {0}, {0}}), std::invalid_argument);
+  FusionConfig bad;
+  bad.max_relative_depth = 0;
+  EXPECT_THROW(DepthFusion(bad, torch::kCPU), std::invalid_argument);
+  bad = FusionConfig{};
+  bad.min_confidence = 1.5;
+  EXPECT_THROW(bad.validate(), std::invalid_argument);
+  EXPECT_THROW(StreamingFusion(FusionConfig{}, 0, 100, torch::kCPU), std::invalid_argument);
+}
+
+TEST(StreamingFusion, AgreesWithBatchFusion) {
+  auto views = ring_views(6);
+  FusionConfig cfg;
+  auto batch = DepthFusion(cfg, torch::kCPU).fuse(views, all_others(views.size()));
+  StreamingFusion stream(cfg, 6, 1000000, torch::kCPU);
+  size_t streamed = 0;
+  for (const auto& v : views) streamed += stream.add(v).size();
+  EXPECT_EQ(stream.num_views(), 6u);
+  EXPECT_EQ(streamed, stream.cloud().size());
+  ASSERT_EQ(stream.cloud().size(), batch.size());  // the same pixels survive
+  // The same points, up to averaging over fewer views at emission time.
+  auto d = torch::cdist(to_tensor(stream.cloud()), to_tensor(batch)).amin(1);
+  EXPECT_LT(d.median().item<double>(), 1e-4);
+  EXPECT_LT(d.max().item<double>(), 0.01);
+  expect_accurate(to_tensor(stream.cloud()));
+  EXPECT_GE(*std::min_element(stream.cloud().num_views.begin(), stream.cloud().num_views.end()), 3);
+}
+
+TEST(StreamingFusion, FirstViewsConfirmedLaterAndWindowBoundsMemory) {
+  auto views = ring_views(8);
+  FusionConfig cfg;
+  StreamingFusion stream(cfg, 3, 1000000, torch::kCPU);
+  // Nothing can be confirmed before 4 estimates exist (3 agreeing others needed).
+  EXPECT_EQ(stream.add(views[0]).size(), 0u);
+  EXPECT_EQ(stream.add(views[1]).size(), 0u);
+  EXPECT_EQ(stream.add(views[2]).size(), 0u);
+  auto fourth = stream.add(views[3]);
+  EXPECT_GT(fourth.size(), 1000u);  // all four views' shared pixels at once
+  EXPECT_EQ(stream.num_views(), 3u);  // the ring holds `window` estimates
+  for (size_t i = 4; i < views.size(); ++i) stream.add(views[i]);
+  EXPECT_EQ(stream.num_views(), 3u);
+  expect_accurate(to_tensor(stream.cloud()));
+  stream.reset();
+  EXPECT_EQ(stream.num_views(), 0u);
+  EXPECT_TRUE(stream.cloud().empty());
+}
+
+TEST(StreamingFusion, VoxelHashAndPointLimitBoundTheCloud) {
+  auto views = ring_views(8);
+  FusionConfig cfg;
+  cfg.voxel_size = 0.03;
+  StreamingFusion stream(cfg, 8, 1000000, torch::kCPU);
+  for (const auto& v : views) stream.add(v);
+  std::set<std::tuple<int64_t, int64_t, int64_t>> cells;
+  for (const auto& p : stream.cloud().points) {
+    EXPECT_TRUE(cells.insert({int64_t(std::floor(p.x() / 0.03)), int64_t(std::floor(p.y() / 0.03)), int64_t(std::floor(p.z() / 0.03))}).second);
+  }
+  const size_t full = stream.cloud().size();
+  ASSERT_GT(full, 200u);
+  StreamingFusion small(cfg, 8, 100, torch::kCPU);
+  for (const auto& v : views) {
+    small.add(v);
+    EXPECT_LE(small.cloud().size(), 100u);
+  }
+  EXPECT_GT(small.cloud().size(), 50u);
+}
+
+TEST(StreamingFusion, BadViewLeavesStateUnchanged) {
+  auto views = ring_views(4);
+  StreamingFusion stream(FusionConfig{}, 4, 1000000, torch::kCPU);
+  for (const auto& v : views) stream.add(v);
+  const size_t n = stream.cloud().size();
+  auto bad = views[0];
+  bad.color = torch::zeros({10, 10, 3}, torch::kUInt8);
+  EXPECT_THROW(stream.add(bad), std::invalid_argument);
+  EXPECT_EQ(stream.num_views(), 4u);
+  EXPECT_EQ(stream.cloud().size(), n);
+}
+
+TEST(DepthFusion, CudaMatchesCpu) {
+  if (!torch::cuda::is_available()) GTEST_SKIP() << "no CUDA device: CUDA fusion test skipped";
+  auto views = ring_views();
+  auto cpu = DepthFusion(FusionConfig{}, torch::kCPU).fuse(views, all_others(views.size()));
+  auto gpu = DepthFusion(FusionConfig{}, torch::kCUDA).fuse(views, all_others(views.size()));
+  EXPECT_NEAR(static_cast<double>(gpu.size()), static_cast<double>(cpu.size()), 0.002 * cpu.size());
+  expect_accurate(to_tensor(gpu));
+}
+
+}  // namespace
+}  // namespace umvs
