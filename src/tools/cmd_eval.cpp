@@ -1,0 +1,262 @@
+// umvs eval depth|cloud: depth-map and point-cloud metrics against ground truth (core/metrics.h).
+#include <torch/torch.h>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <sstream>
+
+#include "unsup_mvs/core/device.h"
+#include "unsup_mvs/core/metrics.h"
+#include "unsup_mvs/io/array_io.h"
+#include "unsup_mvs/io/mvs_folder.h"
+#include "unsup_mvs/io/ply.h"
+#include "unsup_mvs/tools/args.h"
+#include "unsup_mvs/tools/command.h"
+
+namespace fs = std::filesystem;
+
+namespace {
+
+std::vector<double> parse_reals(const umvs::Args& args, const std::string& name) {
+  std::vector<double> out;
+  for (const auto& s : args.all(name)) {
+    if (s.empty()) continue;
+    char* end = nullptr;
+    const double v = std::strtod(s.c_str(), &end);
+    if (end == s.c_str() || *end != '\0' || !std::isfinite(v) || v <= 0) {
+      throw std::invalid_argument("option --" + name + " needs comma-separated positive numbers, got '" + s + "'");
+    }
+    out.push_back(v);
+  }
+  return out;
+}
+
+// JSON number (NaN and infinity are not JSON: null).
+std::string jnum(double v) {
+  if (!std::isfinite(v)) return "null";
+  char buf[32];
+  std::snprintf(buf, sizeof(buf), "%.9g", v);
+  return buf;
+}
+std::string jlist(const std::vector<double>& v) {
+  std::string s = "[";
+  for (size_t i = 0; i < v.size(); ++i) s += (i ? ", " : "") + jnum(v[i]);
+  return s + "]";
+}
+std::string pct(double share) {
+  char buf[16];
+  std::snprintf(buf, sizeof(buf), "%6.2f", 100.0 * share);
+  return buf;
+}
+std::string num(double v, const char* fmt = "%10.5g") {
+  if (!std::isfinite(v)) return std::string(10 - 3, ' ') + "nan";
+  char buf[32];
+  std::snprintf(buf, sizeof(buf), fmt, v);
+  return buf;
+}
+std::string threshold_label(double t) {
+  std::ostringstream os;
+  os << t;
+  return os.str();
+}
+
+// The folder of depth maps inside an estimate folder: depth_est/ (umvs infer), depth_gt/, depth/, or the folder itself.
+std::string find_depth_dir(const std::string& root, const std::string& sub) {
+  if (!sub.empty()) {
+    const auto p = fs::path(root) / sub;
+    if (!fs::is_directory(p)) throw std::runtime_error("no folder " + p.string());
+    return p.string();
+  }
+  for (const char* s : {"depth_est", "depth_gt", "depth"}) {
+    if (fs::is_directory(fs::path(root) / s)) return (fs::path(root) / s).string();
+  }
+  if (!fs::is_directory(root)) throw std::runtime_error("estimate folder '" + root + "' does not exist");
+  return root;
+}
+
+std::string depth_json(const umvs::DepthMetrics& m) {
+  std::ostringstream os;
+  os << "\"gt_pixels\": " << m.gt_pixels << ", \"evaluated_pixels\": " << m.evaluated_pixels
+     << ", \"completeness\": " << jnum(m.completeness()) << ", \"mae\": " << jnum(m.mae)
+     << ", \"abs_rel\": " << jnum(m.abs_rel) << ", \"rmse\": " << jnum(m.rmse)
+     << ", \"within_rel\": " << jlist(m.within_rel) << ", \"within_abs\": " << jlist(m.within_abs);
+  return os.str();
+}
+
+int eval_depth(int argc, char** argv) {
+  umvs::Args args("eval depth",
+                  "Depth maps of EST against the ground truth of GT (a `umvs synth` folder: depth_gt/*.pfm, cams/).\n"
+                  "EST holds depth_est/XXXXXXXX.pfm (umvs infer), depth_gt/ or depth/ (or the .pfm files directly).\n"
+                  "An estimate at another resolution (MVSNet's 1/4) is compared at its own pixels: each looks up\n"
+                  "the nearest ground-truth pixel through the two cameras (EST/cams/XXXXXXXX_cam.txt, same pose),\n"
+                  "i.e. pixel (4i, 4j) for umvs infer output. Errors count pixels where both are valid;\n"
+                  "completeness is the share of valid ground-truth pixels that have a valid estimate.");
+  args.required("est", "estimate folder")
+      .required("gt", "ground-truth folder (depth_gt/, cams/)")
+      .option("est-subdir", "", "subfolder of EST with the depth maps (default: depth_est, depth_gt or depth)")
+      .option("min-confidence", "0", "ignore estimates whose EST/confidence/XXXXXXXX.pfm is below this")
+      .option("rel-thresholds", "0.01,0.03", "relative error thresholds (comma-separated)")
+      .option("abs-thresholds", "0.001,0.003", "absolute error thresholds in scene units (comma-separated)")
+      .option("views", "", "comma-separated view ids (default: every estimate)")
+      .flag("json", "print JSON instead of a table");
+  if (!args.parse(argc, argv)) return 0;
+  umvs::configure_threads(0);
+  umvs::DepthMetricsConfig cfg;
+  cfg.rel_thresholds = parse_reals(args, "rel-thresholds");
+  cfg.abs_thresholds = parse_reals(args, "abs-thresholds");
+  const std::string est_root = args.str("est"), gt_root = args.str("gt");
+  const std::string est_dir = find_depth_dir(est_root, args.str("est-subdir"));
+  const double min_conf = args.real("min-confidence");
+
+  std::vector<int> ids = args.integers("views");
+  if (ids.empty()) {
+    for (const auto& e : fs::directory_iterator(est_dir)) {
+      const auto p = e.path();
+      if (p.extension() != ".pfm") continue;
+      const std::string stem = p.stem().string();
+      if (stem.size() != 8 || stem.find_first_not_of("0123456789") != std::string::npos) continue;
+      ids.push_back(std::stoi(stem));
+    }
+    std::sort(ids.begin(), ids.end());
+  }
+  if (ids.empty()) throw std::runtime_error("no depth maps XXXXXXXX.pfm in " + est_dir);
+
+  std::vector<umvs::DepthMetrics> per_view;
+  std::vector<std::string> notes;
+  for (int id : ids) {
+    const std::string stem = umvs::view_file_stem(id);
+    const std::string est_path = est_dir + "/" + stem + ".pfm";
+    const std::string gt_path = gt_root + "/depth_gt/" + stem + ".pfm";
+    if (!fs::exists(est_path)) throw std::runtime_error("no estimate " + est_path);
+    if (!fs::exists(gt_path)) throw std::runtime_error("no ground truth " + gt_path + " for view " + std::to_string(id));
+    torch::Tensor est = umvs::read_pfm(est_path);
+    torch::Tensor gt = umvs::read_pfm(gt_path);
+    const std::string est_cam = est_root + "/cams/" + stem + "_cam.txt";
+    const std::string gt_cam = gt_root + "/cams/" + stem + "_cam.txt";
+    if (fs::exists(est_cam) && fs::exists(gt_cam)) {
+      auto ce = umvs::read_cam_file(est_cam).camera, cg = umvs::read_cam_file(gt_cam).camera;
+      ce.width = static_cast<int>(est.size(1));
+      ce.height = static_cast<int>(est.size(0));
+      cg.width = static_cast<int>(gt.size(1));
+      cg.height = static_cast<int>(gt.size(0));
+      try {
+        gt = umvs::sample_depth_at_camera(gt, cg, ce);
+      } catch (const std::invalid_argument& e) {
+        throw std::invalid_argument("view " + std::to_string(id) + ": " + e.what() + " (" + est_cam + " vs " + gt_cam + ")");
+      }
+    } else if (est.sizes() != gt.sizes()) {
+      throw std::invalid_argument("view " + std::to_string(id) + ": estimate " + std::to_string(est.size(1)) + "x" +
+                                  std::to_string(est.size(0)) + " and ground truth " + std::to_string(gt.size(1)) + "x" +
+                                  std::to_string(gt.size(0)) + " differ in size and " + est_cam +
+                                  " is missing: give the estimate's camera to compare them");
+    }
+    torch::Tensor valid;
+    if (min_conf > 0) {
+      const std::string conf_path = est_root + "/confidence/" + stem + ".pfm";
+      if (!fs::exists(conf_path)) throw std::runtime_error("--min-confidence given but " + conf_path + " is missing");
+      const auto conf = umvs::read_pfm(conf_path);
+      if (conf.sizes() != est.sizes()) throw std::runtime_error(conf_path + " does not match the size of its depth map");
+      valid = conf >= min_conf;
+    }
+    per_view.push_back(umvs::evaluate_depth(est, gt, valid, cfg));
+  }
+  const umvs::DepthMetrics all = umvs::combine_depth_metrics(per_view);
+
+  if (args.on("json")) {
+    std::cout << "{\"rel_thresholds\": " << jlist(cfg.rel_thresholds) << ", \"abs_thresholds\": " << jlist(cfg.abs_thresholds)
+              << ",\n \"views\": [\n";
+    for (size_t i = 0; i < ids.size(); ++i) {
+      std::cout << "  {\"view\": " << ids[i] << ", " << depth_json(per_view[i]) << "}" << (i + 1 < ids.size() ? "," : "") << "\n";
+    }
+    std::cout << " ],\n \"overall\": {" << depth_json(all) << "}}\n";
+    return 0;
+  }
+  std::ostringstream head;
+  head << "    view        MAE    abs rel";
+  for (double t : cfg.rel_thresholds) head << std::string(std::max<int>(1, 8 - 2 - static_cast<int>(threshold_label(100 * t).size())), ' ') << "<" << threshold_label(100 * t) << "%";
+  for (double t : cfg.abs_thresholds) head << "  <" << threshold_label(t);
+  head << "  complete%";
+  std::cout << "depth: " << est_dir << " vs " << gt_root << "/depth_gt (shares in % of evaluated pixels)\n" << head.str() << "\n";
+  auto row = [&](const std::string& name, const umvs::DepthMetrics& m) {
+    std::printf("%8s %10s %10s", name.c_str(), num(m.mae).c_str(), num(m.abs_rel).c_str());
+    for (size_t i = 0; i < m.within_rel.size(); ++i) {
+      const int w = static_cast<int>(threshold_label(100 * cfg.rel_thresholds[i]).size()) + 4;
+      std::printf("%*s", std::max(w, 8), pct(m.within_rel[i]).c_str());
+    }
+    for (size_t i = 0; i < m.within_abs.size(); ++i) {
+      const int w = static_cast<int>(threshold_label(cfg.abs_thresholds[i]).size()) + 3;
+      std::printf("%*s", std::max(w, 7), pct(m.within_abs[i]).c_str());
+    }
+    std::printf("  %9s\n", pct(m.completeness()).c_str());
+  };
+  for (size_t i = 0; i < ids.size(); ++i) row(std::to_string(ids[i]), per_view[i]);
+  row("overall", all);
+  return 0;
+}
+
+int eval_cloud(int argc, char** argv) {
+  umvs::Args args("eval cloud",
+                  "DTU-style accuracy (EST -> GT nearest-neighbour distance) and completeness (GT -> EST), mean and\n"
+                  "median, distances above --max-dist left out as outliers; overall = mean of the two means.\n"
+                  "Tanks-and-Temples precision, recall and F-score at each --thresholds distance. Distances in scene units.");
+  args.required("est", "estimated cloud (.ply)")
+      .required("gt", "ground-truth cloud (.ply), e.g. gt.ply of a `umvs synth` folder")
+      .option("max-dist", "0", "outlier cap: distances above it are left out of the means (DTU: 0.02 m); 0 = none")
+      .option("thresholds", "0.002,0.005,0.01", "precision/recall thresholds (comma-separated)")
+      .option("downsample", "0", "first reduce both clouds to this minimum spacing (DTU: 0.0002 m); 0 = no")
+      .flag("json", "print JSON instead of a table");
+  if (!args.parse(argc, argv)) return 0;
+  umvs::configure_threads(0);
+  umvs::CloudMetricsConfig cfg;
+  cfg.max_distance = args.real("max-dist");
+  cfg.thresholds = parse_reals(args, "thresholds");
+  cfg.downsample_spacing = args.real("downsample");
+  const auto est = umvs::read_ply(args.str("est"));
+  const auto gt = umvs::read_ply(args.str("gt"));
+  if (gt.empty()) throw std::runtime_error("ground-truth cloud " + args.str("gt") + " has no points");
+  const umvs::CloudMetrics m = umvs::evaluate_cloud(est, gt, cfg);
+  if (args.on("json")) {
+    std::cout << "{\"est_points\": " << m.est_points << ", \"gt_points\": " << m.gt_points
+              << ", \"accuracy_mean\": " << jnum(m.accuracy_mean) << ", \"accuracy_median\": " << jnum(m.accuracy_median)
+              << ", \"completeness_mean\": " << jnum(m.completeness_mean)
+              << ", \"completeness_median\": " << jnum(m.completeness_median) << ", \"overall\": " << jnum(m.overall)
+              << ", \"accuracy_outliers\": " << jnum(m.accuracy_outliers)
+              << ", \"completeness_outliers\": " << jnum(m.completeness_outliers) << ",\n \"thresholds\": " << jlist(m.thresholds)
+              << ", \"precision\": " << jlist(m.precision) << ", \"recall\": " << jlist(m.recall)
+              << ", \"fscore\": " << jlist(m.fscore) << "}\n";
+    return 0;
+  }
+  std::cout << "cloud: " << args.str("est") << " (" << m.est_points << " points) vs " << args.str("gt") << " ("
+            << m.gt_points << " points)" << (cfg.downsample_spacing > 0 ? ", after downsampling" : "") << "\n";
+  std::printf("              mean      median   outliers%%\n");
+  std::printf("accuracy  %10s  %10s   %7s\n", num(m.accuracy_mean).c_str(), num(m.accuracy_median).c_str(), pct(m.accuracy_outliers).c_str());
+  std::printf("complete  %10s  %10s   %7s\n", num(m.completeness_mean).c_str(), num(m.completeness_median).c_str(), pct(m.completeness_outliers).c_str());
+  std::printf("overall   %10s\n", num(m.overall).c_str());
+  std::printf("\n threshold  precision%%  recall%%  F-score%%\n");
+  for (size_t i = 0; i < m.thresholds.size(); ++i) {
+    std::printf("%10s  %10s  %7s  %8s\n", num(m.thresholds[i], "%.4g").c_str(), pct(m.precision[i]).c_str(), pct(m.recall[i]).c_str(),
+                pct(m.fscore[i]).c_str());
+  }
+  return 0;
+}
+
+}  // namespace
+
+UMVS_COMMAND(eval, "depth-map (eval depth) and point-cloud (eval cloud) metrics against ground truth") {
+  const std::string usage = "usage: umvs eval depth --est DIR --gt DIR [options]\n       umvs eval cloud --est PLY --gt PLY [options]\n"
+                            "(umvs eval depth --help, umvs eval cloud --help for the options)\n";
+  if (argc < 1) {
+    std::cerr << usage;
+    return 2;
+  }
+  const std::string mode = argv[0];
+  if (mode == "depth") return eval_depth(argc - 1, argv + 1);
+  if (mode == "cloud") return eval_cloud(argc - 1, argv + 1);
+  if (mode == "--help" || mode == "-h") {
+    std::cout << usage;
+    return 0;
+  }
+  throw std::invalid_argument("unknown evaluation '" + mode + "' (expected depth or cloud)\n" + usage);
+}
