@@ -1,0 +1,89 @@
+#include <gtest/gtest.h>
+#include <torch/torch.h>
+
+#include "unsup_mvs/core/metrics.h"
+
+namespace umvs {
+namespace {
+
+// A 1 mm grid on the plane z = 0, 150 x 150 points.
+PointCloud plane_grid(double z = 0.0) {
+  PointCloud c;
+  for (int i = 0; i < 150; ++i)
+    for (int j = 0; j < 150; ++j) c.points.emplace_back(i * 0.001f, j * 0.001f, static_cast<float>(z));
+  return c;
+}
+
+TEST(CloudMetrics, CloudAgainstItselfIsPerfect) {
+  const PointCloud gt = plane_grid();
+  const CloudMetrics m = evaluate_cloud(gt, gt);
+  EXPECT_EQ(m.accuracy_mean, 0.0);
+  EXPECT_EQ(m.completeness_mean, 0.0);
+  EXPECT_EQ(m.overall, 0.0);
+  ASSERT_EQ(m.fscore.size(), 3u);
+  for (double f : m.fscore) EXPECT_DOUBLE_EQ(f, 1.0);
+}
+
+TEST(CloudMetrics, ShiftedCopyGivesTheShift) {
+  const double d = 0.0035;
+  const CloudMetrics m = evaluate_cloud(plane_grid(d), plane_grid());
+  EXPECT_NEAR(m.accuracy_mean, d, 1e-6);
+  EXPECT_NEAR(m.accuracy_median, d, 1e-6);
+  EXPECT_NEAR(m.completeness_mean, d, 1e-6);
+  EXPECT_NEAR(m.overall, d, 1e-6);
+  // Thresholds 2, 5 and 10 mm: nothing within 2 mm, everything within 5 mm.
+  EXPECT_DOUBLE_EQ(m.precision[0], 0.0);
+  EXPECT_DOUBLE_EQ(m.recall[1], 1.0);
+  EXPECT_DOUBLE_EQ(m.fscore[2], 1.0);
+  // The outlier cap drops distances beyond it from the means.
+  CloudMetricsConfig capped;
+  capped.max_distance = 0.002;
+  const CloudMetrics c = evaluate_cloud(plane_grid(d), plane_grid(), capped);
+  EXPECT_DOUBLE_EQ(c.accuracy_outliers, 1.0);
+}
+
+TEST(CloudMetrics, HalfCloudIsAccurateButIncomplete) {
+  PointCloud half;
+  const PointCloud gt = plane_grid();
+  for (const auto& p : gt.points)
+    if (p.x() < 0.0745f) half.points.push_back(p);
+  const CloudMetrics m = evaluate_cloud(half, gt);
+  EXPECT_EQ(m.accuracy_mean, 0.0);
+  EXPECT_GT(m.completeness_mean, 0.01);  // the missing half is up to 75 mm away
+  EXPECT_NEAR(m.recall[0], 0.5, 0.02);
+  EXPECT_DOUBLE_EQ(m.precision[0], 1.0);
+  EXPECT_THROW(evaluate_cloud(gt, PointCloud()), std::invalid_argument);
+}
+
+TEST(CloudMetrics, DownsamplingKeepsTheMinimumSpacing) {
+  const PointCloud d = downsample_min_spacing(plane_grid(), 0.0025);
+  EXPECT_LT(d.size(), plane_grid().size() / 4);
+  EXPECT_GT(d.size(), plane_grid().size() / 16);
+  const auto dist = nearest_distances(d.points, plane_grid().points);
+  for (double x : dist) EXPECT_EQ(x, 0.0);  // kept points are input points
+}
+
+TEST(DepthMetrics, GroundTruthAgainstItselfAndKnownErrors) {
+  auto gt = torch::rand({40, 50}) * 2 + 0.5;
+  gt.slice(0, 0, 5).zero_();  // no ground truth in the first 5 rows
+  const DepthMetrics self = evaluate_depth(gt, gt, torch::Tensor());
+  EXPECT_EQ(self.gt_pixels, 35 * 50);
+  EXPECT_EQ(self.mae, 0.0);
+  EXPECT_EQ(self.abs_rel, 0.0);
+  EXPECT_DOUBLE_EQ(self.completeness(), 1.0);
+  for (double w : self.within_rel) EXPECT_DOUBLE_EQ(w, 1.0);
+
+  auto est = gt * 1.02;  // 2 % too far everywhere
+  est.slice(0, 5, 14).zero_();  // and no estimate on 9 of the 35 valid rows
+  const DepthMetrics m = evaluate_depth(est, gt, torch::Tensor());
+  EXPECT_NEAR(m.abs_rel, 0.02, 1e-6);
+  EXPECT_DOUBLE_EQ(m.within_rel[0], 0.0);  // 1 %
+  EXPECT_DOUBLE_EQ(m.within_rel[1], 1.0);  // 3 %
+  EXPECT_NEAR(m.completeness(), 26.0 / 35.0, 1e-12);
+  const double expected_mae = (gt.slice(0, 14) * 0.02).mean().item<double>();
+  EXPECT_NEAR(m.mae, expected_mae, 1e-6);
+  EXPECT_THROW(evaluate_depth(est.slice(0, 1), gt, torch::Tensor()), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace umvs
