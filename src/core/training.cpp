@@ -13,6 +13,7 @@
 
 #include "unsup_mvs/core/geometry.h"
 #include "unsup_mvs/core/image_ops.h"
+#include "unsup_mvs/core/metrics.h"
 
 namespace umvs {
 
@@ -107,17 +108,15 @@ TrainingBatch make_training_batch(const std::vector<TrainingTuple>& tuples, int 
 }
 
 DepthErrors depth_errors(const torch::Tensor& est, const torch::Tensor& gt) {
-  auto e = est.detach().to(torch::kCPU, torch::kFloat64), g = gt.detach().to(torch::kCPU, torch::kFloat64);
-  auto mask = (g > 0) & torch::isfinite(g) & torch::isfinite(e);
+  DepthMetricsConfig cfg;
+  cfg.rel_thresholds = {0.01};
+  const auto m = evaluate_depth(est.detach().reshape({1, -1}).cpu(), gt.detach().reshape({1, -1}).cpu(), {}, cfg);
   DepthErrors out;
-  out.pixels = mask.sum().item<int64_t>();
+  out.pixels = m.evaluated_pixels;
   if (out.pixels == 0) return out;
-  auto err = (e - g).abs().masked_select(mask);
-  out.mean_abs = err.mean().item<double>();
-  out.median_abs = err.median().item<double>();
-  const auto g_valid = g.masked_select(mask);
-  out.abs_rel = (err / g_valid).mean().item<double>();
-  out.within_1pct = (err <= 0.01 * g_valid).to(torch::kFloat64).mean().item<double>();
+  out.mean_abs = m.mae;
+  out.abs_rel = m.abs_rel;
+  out.within_1pct = m.within_rel.at(0);
   return out;
 }
 

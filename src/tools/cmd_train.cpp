@@ -57,7 +57,7 @@ std::string describe(const umvs::Evaluation& ev) {
   s.precision(4);
   s << "photometric " << ev.loss.photometric << ", ssim " << ev.loss.ssim << ", total " << ev.loss.total;
   if (ev.depth.pixels > 0) {
-    s << ", depth |err| mean " << ev.depth.mean_abs << " median " << ev.depth.median_abs << ", abs rel "
+    s << ", depth |err| mean " << ev.depth.mean_abs << ", abs rel "
       << ev.depth.abs_rel << ", within 1% "
       << 100.0 * ev.depth.within_1pct << "%";
   }
@@ -212,13 +212,13 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
     if (!args.str("out").empty()) {
       umvs::make_directories(args.str("out"));
       umvs::write_file_atomically(args.str("out") + "/eval.csv", [&](std::ostream& os) {
-        os << "checkpoint,tuples,photometric,ssim,smoothness,total,abs_err,median_abs_err,abs_rel,within_1pct\n"
+        os << "checkpoint,tuples,photometric,ssim,smoothness,total,abs_err,abs_rel,within_1pct\n"
            << args.str("eval-only") << "," << ev.tuples << "," << ev.loss.photometric << "," << ev.loss.ssim << ","
            << ev.loss.smoothness << "," << ev.loss.total << ",";
         if (ev.depth.pixels > 0) {
-          os << ev.depth.mean_abs << "," << ev.depth.median_abs << "," << ev.depth.abs_rel << "," << ev.depth.within_1pct;
+          os << ev.depth.mean_abs << "," << ev.depth.abs_rel << "," << ev.depth.within_1pct;
         } else {
-          os << ",,,";
+          os << ",,";
         }
         os << "\n";
       });

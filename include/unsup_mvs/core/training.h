@@ -54,10 +54,9 @@ TrainingBatch make_training_batch(const std::vector<TrainingTuple>& tuples, int 
 // network's depth grid.  [B,C,H,W] -> [B,C,H/4,W/4]
 torch::Tensor downsample_to_depth_grid(const torch::Tensor& image);
 
-// Depth errors on the pixels with ground truth (> 0).  est, gt [B,h,w]
+// Depth errors on the pixels with ground truth (> 0), via evaluate_depth (metrics.h).  est, gt [B,h,w]
 struct DepthErrors {
   double mean_abs = 0.0;    // mean |est - gt| (scene units)
-  double median_abs = 0.0;
   double abs_rel = 0.0;     // mean |est - gt| / gt (scale-free)
   double within_1pct = 0.0; // fraction with |est - gt| <= 1% of gt
   int64_t pixels = 0;
