@@ -90,59 +90,77 @@ std::string MvsFolderSource::description() const {
   return s.str();
 }
 
-TrainingTuple MvsFolderSource::tuple(size_t index, std::mt19937_64* rng) const {
-  if (index >= entries_.size()) throw std::out_of_range("tuple index " + std::to_string(index) + " out of range");
-  const Entry& e = entries_[index];
-  const MvsFolder& folder = folders_[e.folder];
-  const MvsView ref = folder.load_view(e.ref);
-  const int W0 = ref.cam.camera.width, H0 = ref.cam.camera.height;
-  int width = config_.width, height = config_.height;
+TrainingTuple make_training_tuple(std::string name, const ViewInput& ref, const std::vector<ViewInput>& sources,
+                                  double depth_min, double depth_max, const torch::Tensor& depth_gt,
+                                  const TupleConfig& config, std::mt19937_64* rng) {
+  const size_t needed = static_cast<size_t>(std::max(config.views_in - 1, config.views_loss));
+  if (sources.size() < needed) {
+    throw std::invalid_argument(name + ": " + std::to_string(sources.size()) + " source views, " +
+                                std::to_string(needed) + " needed");
+  }
+  const int W0 = ref.camera.width, H0 = ref.camera.height;
+  int width = config.width, height = config.height;
   if (width == 0 || height == 0) {
     const auto p = plan_network_resize(W0, H0, 0, 0);
     width = p.width;
     height = p.height;
   }
-  const double zoom = rng ? uniform(*rng, 1.0, config_.max_zoom) : 1.0;
+  const double zoom = rng ? uniform(*rng, 1.0, config.max_zoom) : 1.0;
   const double fx = rng ? uniform(*rng, 0.0, 1.0) : 0.5, fy = rng ? uniform(*rng, 0.0, 1.0) : 0.5;
+  const NetworkResize plan = cover_and_crop(W0, H0, width, height, zoom, fx, fy);
   // One photometric change for the whole tuple: contrast, brightness, per-channel gain.
   torch::Tensor gain;
   double contrast = 1.0, brightness = 0.0;
-  if (rng && config_.jitter > 0) {
-    const double j = config_.jitter;
+  if (rng && config.jitter > 0) {
+    const double j = config.jitter;
     contrast = uniform(*rng, 1 - j, 1 + j);
     brightness = uniform(*rng, -j / 2, j / 2);
     gain = torch::tensor({uniform(*rng, 1 - j, 1 + j), uniform(*rng, 1 - j, 1 + j), uniform(*rng, 1 - j, 1 + j)},
                          torch::kFloat32).view({3, 1, 1});
   }
-
-  TrainingTuple t;
-  t.name = folder.root() + " view " + std::to_string(e.ref);
-  auto make_view = [&](const MvsView& v) {
-    if (v.cam.camera.width != W0 || v.cam.camera.height != H0) {
-      throw std::runtime_error(folder.image_path(v.id) + ": image size differs from the reference view's");
+  auto make_view = [&](const ViewInput& v) {
+    if (v.camera.width != W0 || v.camera.height != H0) {
+      throw std::runtime_error(name + ": a source image's size differs from the reference's");
     }
-    const NetworkResize plan = cover_and_crop(W0, H0, width, height, zoom, fx, fy);
     auto img = apply_network_resize(rgb8_to_float(v.image), plan);
     if (gain.defined()) img = (((img - 0.5) * contrast + 0.5 + brightness) * gain).clamp(0, 1);
-    return ViewInput{float_to_rgb8(img), apply_network_resize(v.cam.camera, plan)};
+    return ViewInput{float_to_rgb8(img), apply_network_resize(v.camera, plan)};
   };
+
+  TrainingTuple t;
+  t.name = std::move(name);
   t.network_views.push_back(make_view(ref));
-  std::vector<ViewInput> sources;
-  for (int id : e.sources) sources.push_back(make_view(folder.load_view(id)));
-  t.network_views.insert(t.network_views.end(), sources.begin(), sources.begin() + (config_.views_in - 1));
-  t.loss_views.assign(sources.begin(), sources.begin() + config_.views_loss);
-  t.depth_min = ref.cam.depth_min;
-  t.depth_max = ref.cam.resolved_depth_max(config_.num_depth);
-  const std::string gt_path = folder.depth_gt_path(e.ref);
-  if (!gt_path.empty()) {
-    auto gt = read_pfm(gt_path);
-    if (gt.dim() != 2 || gt.size(0) != H0 || gt.size(1) != W0) {
-      throw std::runtime_error(gt_path + ": ground-truth depth size differs from the image's");
+  std::vector<ViewInput> resized;
+  for (size_t i = 0; i < needed; ++i) resized.push_back(make_view(sources[i]));
+  t.network_views.insert(t.network_views.end(), resized.begin(), resized.begin() + (config.views_in - 1));
+  t.loss_views.assign(resized.begin(), resized.begin() + config.views_loss);
+  t.depth_min = depth_min;
+  t.depth_max = depth_max;
+  if (depth_gt.defined()) {
+    if (depth_gt.dim() != 2 || depth_gt.size(0) != H0 || depth_gt.size(1) != W0) {
+      throw std::runtime_error(t.name + ": ground-truth depth size differs from the image's");
     }
-    t.depth_gt = apply_network_resize_nearest(gt, cover_and_crop(W0, H0, width, height, zoom, fx, fy));
+    t.depth_gt = apply_network_resize_nearest(depth_gt, plan);
   }
   t.validate();
   return t;
+}
+
+TrainingTuple MvsFolderSource::tuple(size_t index, std::mt19937_64* rng) const {
+  if (index >= entries_.size()) throw std::out_of_range("tuple index " + std::to_string(index) + " out of range");
+  const Entry& e = entries_[index];
+  const MvsFolder& folder = folders_[e.folder];
+  const MvsView ref = folder.load_view(e.ref);
+  std::vector<ViewInput> sources;
+  for (int id : e.sources) {
+    const MvsView v = folder.load_view(id);
+    sources.push_back({v.image, v.cam.camera});
+  }
+  torch::Tensor gt;
+  const std::string gt_path = folder.depth_gt_path(e.ref);
+  if (!gt_path.empty()) gt = read_pfm(gt_path);
+  return make_training_tuple(folder.root() + " view " + std::to_string(e.ref), {ref.image, ref.cam.camera}, sources,
+                             ref.cam.depth_min, ref.cam.resolved_depth_max(config_.num_depth), gt, config_, rng);
 }
 
 TupleSampler::TupleSampler(const TupleSource& source, uint64_t seed) : source_(source), rng_(seed) {

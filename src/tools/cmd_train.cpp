@@ -12,6 +12,9 @@
 #include "unsup_mvs/io/checkpoint.h"
 #include "unsup_mvs/io/image_io.h"
 #include "unsup_mvs/io/training_data.h"
+#ifdef UMVS_HAVE_ROS
+#include "unsup_mvs/io/bag_training_data.h"
+#endif
 #include "unsup_mvs/tools/args.h"
 #include "unsup_mvs/tools/command.h"
 #include "unsup_mvs/tools/progress.h"
@@ -128,6 +131,51 @@ std::vector<umvs::TrainingTuple> fixed_tuples(const umvs::TupleSource& source, i
   return out;
 }
 
+// The data: a training source and, when there is one, the held-out source validated on.
+struct Data {
+  std::unique_ptr<umvs::TupleSource> train, held_out;
+};
+
+Data open_folders(const umvs::Args& args, const umvs::TupleConfig& config) {
+  Data d;
+  d.train = std::make_unique<umvs::MvsFolderSource>(args.all("data"), config);
+  if (args.given("val")) d.held_out = std::make_unique<umvs::MvsFolderSource>(args.all("val"), config);
+  return d;
+}
+
+Data open_bags(const umvs::Args& args, const umvs::TupleConfig& config, bool eval_only) {
+#ifdef UMVS_HAVE_ROS
+  umvs::BagDataConfig bag;
+  bag.topics.image = args.str("image-topic");
+  bag.topics.camera_info = args.str("camera-info-topic");
+  bag.topics.world_frame = args.str("world-frame");
+  bag.rectified = args.integer("rectified") != 0;
+  bag.keyframes.min_translation = args.real("min-translation");
+  bag.keyframes.min_rotation_deg = args.real("min-rotation-deg");
+  bag.depth_min = args.real("depth-min");
+  bag.depth_max = args.real("depth-max");
+  bag.holdout_every = args.integer("holdout-every");
+  auto keyframes = std::make_shared<const std::vector<umvs::BagKeyframe>>(
+      umvs::read_bag_keyframes(args.all("bag"), bag, &std::cerr));
+  Data d;
+  if (bag.holdout_every > 0) {
+    d.held_out = std::make_unique<umvs::BagSource>(keyframes, umvs::BagSplit::kHeldOut, bag, config);
+  }
+  if (!eval_only) {
+    d.train = std::make_unique<umvs::BagSource>(
+        keyframes, bag.holdout_every > 0 ? umvs::BagSplit::kTraining : umvs::BagSplit::kAll, bag, config);
+  } else if (!d.held_out) {
+    d.held_out = std::make_unique<umvs::BagSource>(keyframes, umvs::BagSplit::kAll, bag, config);
+  }
+  return d;
+#else
+  (void)config;
+  (void)eval_only;
+  throw std::invalid_argument("--bag: this umvs was built without ROS (UMVS_WITH_ROS=OFF) and cannot read bags; "
+                              "convert the log to an MVSNet folder elsewhere or rebuild with ROS");
+#endif
+}
+
 }  // namespace
 
 UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photometric loss") {
@@ -142,8 +190,21 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
       "best.pt is only replaced by a model with a lower validation score: GT depth error when the\n"
       "--val folders have depth_gt/, else their photometric loss (without --val: the training loss\n"
       "since the previous checkpoint). With --eval-only CHECKPOINT nothing is trained: the held-out\n"
-      "loss (and GT depth error) of that checkpoint on --data is printed (and written to OUT/eval.csv).");
-  args.required("data", "MVSNet-format folder(s), comma-separated")
+      "loss (and GT depth error) of that checkpoint on --data is printed (and written to OUT/eval.csv).\n"
+      "With --bag instead of --data, the keyframes of robot logs are the data (the keyframe_selector's\n"
+      "policy); every --holdout-every-th keyframe is held out for validation, and --eval-only scores\n"
+      "exactly those held-out keyframes.");
+  args.option("data", "", "MVSNet-format folder(s), comma-separated (or --bag)")
+      .repeated("bag", "rosbag file(s) with posed images, instead of --data (repeat or comma-separate)")
+      .option("image-topic", "/camera/image_rect_color", "--bag: sensor_msgs/Image topic (rgb8, bgr8, mono8, ...)")
+      .option("camera-info-topic", "/camera/camera_info", "--bag: sensor_msgs/CameraInfo topic")
+      .option("world-frame", "world", "--bag: fixed tf frame of the camera poses")
+      .option("rectified", "1", "--bag: 1 = images are rectified (intrinsics from P), 0 = from K")
+      .option("min-translation", "0.10", "--bag: metres between keyframes (as the keyframe_selector)")
+      .option("min-rotation-deg", "10", "--bag: or degrees between keyframes")
+      .option("depth-min", "0.3", "--bag: plane-sweep depth range near bound (m)")
+      .option("depth-max", "10", "--bag: far bound (m)")
+      .option("holdout-every", "5", "--bag: hold out every k-th keyframe for validation (0 = none)")
       .option("out", "", "output folder (required unless --eval-only)")
       .option("init", "", "start from this checkpoint (ours or MVSNet_pytorch weights); default random")
       .flag("resume", "continue exactly from OUT/last.pt")
@@ -202,12 +263,19 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
     throw std::invalid_argument("--top-k " + std::to_string(tcfg.loss.top_k) + " exceeds --views-loss " +
                                 std::to_string(data_cfg.views_loss));
   }
-  const umvs::MvsFolderSource source(args.all("data"), data_cfg);
-  std::cerr << "data: " << source.description() << "\nloss: " << tcfg.loss.to_string() << "\n";
+  const bool from_bags = args.given("bag");
+  if (from_bags == args.given("data")) throw std::invalid_argument("give either --data folders or --bag files");
+  const bool eval_only = args.given("eval-only");
+  Data data = from_bags ? open_bags(args, data_cfg, eval_only) : open_folders(args, data_cfg);
+  // --eval-only scores held-out bag keyframes, or the --data folders themselves.
+  std::cerr << "data: " << (eval_only && from_bags ? *data.held_out : *data.train).description()
+            << "\nloss: " << tcfg.loss.to_string() << "\n";
 
-  if (args.given("eval-only")) {
+  if (eval_only) {
+    const umvs::TupleSource& eval_source = from_bags ? *data.held_out : *data.train;
     auto loaded = umvs::load_model(args.str("eval-only"), device);
-    const auto ev = umvs::evaluate_model(loaded.model, fixed_tuples(source, args.integer("val-tuples")), tcfg, device);
+    const auto ev =
+        umvs::evaluate_model(loaded.model, fixed_tuples(eval_source, args.integer("val-tuples")), tcfg, device);
     std::cout << args.str("eval-only") << ": " << describe(ev) << "\n";
     if (!args.str("out").empty()) {
       umvs::make_directories(args.str("out"));
@@ -230,12 +298,12 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
   if (out.empty()) throw std::invalid_argument("--out is required for training");
   umvs::make_directories(out);
   const std::string last_path = out + "/last.pt", best_path = out + "/best.pt", log_path = out + "/train_log.csv";
-  std::unique_ptr<umvs::MvsFolderSource> val_source;
+  if (from_bags && args.given("val")) throw std::invalid_argument("--val folders cannot be mixed with --bag");
+  const umvs::TupleSource& source = *data.train;
   std::vector<umvs::TrainingTuple> val_tuples;
-  if (args.given("val")) {
-    val_source = std::make_unique<umvs::MvsFolderSource>(args.all("val"), data_cfg);
-    val_tuples = fixed_tuples(*val_source, args.integer("val-tuples"));
-    std::cerr << "validation: " << val_source->description() << ", using " << val_tuples.size() << "\n";
+  if (data.held_out) {
+    val_tuples = fixed_tuples(*data.held_out, args.integer("val-tuples"));
+    std::cerr << "validation: " << data.held_out->description() << ", using " << val_tuples.size() << "\n";
   }
 
   // The model: resumed, initialised from a checkpoint, or random.

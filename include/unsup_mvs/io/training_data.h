@@ -37,6 +37,14 @@ class TupleSource {
   virtual std::string description() const = 0;
 };
 
+// One tuple at the network size from full-size views (all of the reference's size): resized to
+// cover config.width x height and centre-cropped, or, with `rng`, zoomed, cropped at a random
+// offset and jittered (one draw for the whole tuple; intrinsics follow). `sources` are best first,
+// at least max(views_in - 1, views_loss) of them; `depth_gt` [H,W] may be undefined.
+TrainingTuple make_training_tuple(std::string name, const ViewInput& ref, const std::vector<ViewInput>& sources,
+                                  double depth_min, double depth_max, const torch::Tensor& depth_gt,
+                                  const TupleConfig& config, std::mt19937_64* rng);
+
 // Tuples from MVSNet-format folders: every view with enough neighbours in pair.txt is a
 // reference; its best views_in-1 neighbours feed the network, its best views_loss neighbours the
 // loss. Ground truth comes from depth_gt/XXXXXXXX.pfm when present.

@@ -1,0 +1,209 @@
+// Training tuples from rosbags (io/bag_training_data.h) and `umvs train --bag`, on a synthetic
+// room logged with BagWriter.
+#include <gtest/gtest.h>
+#include <torch/torch.h>
+
+#include <cstdlib>
+#include <fstream>
+#include <sstream>
+
+#include "test_util.h"
+#include "unsup_mvs/core/synth.h"
+#include "unsup_mvs/io/bag_io.h"
+#include "unsup_mvs/io/bag_training_data.h"
+
+namespace {
+
+struct LoggedScene {
+  umvs::SynthScene scene;
+  std::string bag;
+};
+
+// 14 views of a room written as a log (one frame per second).
+const LoggedScene& logged_room() {
+  static const LoggedScene logged = [] {
+    LoggedScene l;
+    umvs::SynthConfig c;
+    c.scene = umvs::SynthSceneType::kRoom;
+    c.seed = 5;
+    c.num_views = 14;
+    c.width = 128;
+    c.height = 96;
+    c.supersample = 1;
+    c.gt_cloud_samples = 0;
+    l.scene = umvs::render_synthetic_scene(c);
+    l.bag = umvs::test::temp_dir("bag_training") + "/room.bag";
+    umvs::BagWriter writer(l.bag);
+    for (size_t i = 0; i < l.scene.views.size(); ++i) {
+      writer.write({100.0 + static_cast<double>(i), l.scene.views[i].image, l.scene.views[i].camera});
+    }
+    writer.close();
+    return l;
+  }();
+  return logged;
+}
+
+umvs::TupleConfig small_tuples() {
+  umvs::TupleConfig t;
+  t.width = 64;
+  t.height = 64;
+  t.views_in = 3;
+  t.views_loss = 4;
+  return t;
+}
+
+umvs::BagDataConfig room_config() {
+  umvs::BagDataConfig c;
+  c.keyframes.min_translation = 0.05;
+  c.keyframes.min_score = 0.1;
+  c.depth_min = 0.4;
+  c.depth_max = 9.0;
+  c.holdout_every = 4;
+  return c;
+}
+
+bool same_pose(const umvs::Camera& a, const umvs::Camera& b) {
+  return (a.T_cam_world.matrix() - b.T_cam_world.matrix()).norm() < 1e-6;
+}
+
+TEST(BagTraining, KeyframesFollowTheSelectorPolicyAndHoldOutEveryKth) {
+  const auto& room = logged_room();
+  const auto config = room_config();
+  const auto keyframes = umvs::read_bag_keyframes({room.bag}, config);
+  std::vector<umvs::Camera> cameras;
+  for (const auto& v : room.scene.views) cameras.push_back(v.camera);
+  const auto expected = umvs::select_keyframes(cameras, config.keyframes);
+  ASSERT_EQ(keyframes.size(), expected.size());
+  ASSERT_GE(keyframes.size(), 8u);
+  for (size_t k = 0; k < keyframes.size(); ++k) {
+    EXPECT_EQ(keyframes[k].frame, expected[k]);
+    EXPECT_TRUE(same_pose(keyframes[k].image.camera, cameras[expected[k]]));
+    EXPECT_EQ(keyframes[k].held_out, k % 4 == 3) << "keyframe " << k;
+  }
+}
+
+TEST(BagTraining, TrainingTuplesNeverTouchHeldOutKeyframes) {
+  const auto& room = logged_room();
+  const auto config = room_config();
+  auto keyframes =
+      std::make_shared<const std::vector<umvs::BagKeyframe>>(umvs::read_bag_keyframes({room.bag}, config));
+  const umvs::BagSource train(keyframes, umvs::BagSplit::kTraining, config, small_tuples());
+  const umvs::BagSource held_out(keyframes, umvs::BagSplit::kHeldOut, config, small_tuples());
+  std::vector<umvs::Camera> held_cameras;
+  for (const auto& k : *keyframes)
+    if (k.held_out) held_cameras.push_back(k.image.camera);
+  ASSERT_GT(train.size(), 0u);
+  ASSERT_GT(held_out.size(), 0u);
+  EXPECT_LE(held_out.size(), held_cameras.size());
+  EXPECT_LE(train.size() + held_cameras.size(), keyframes->size());
+  EXPECT_GE(2 * train.size(), keyframes->size() - held_cameras.size()) << "most keyframes should have neighbours";
+  for (size_t i = 0; i < train.size(); ++i) {
+    const auto t = train.tuple(i, nullptr);
+    EXPECT_EQ(t.network_views.size(), 3u);
+    EXPECT_EQ(t.loss_views.size(), 4u);
+    EXPECT_DOUBLE_EQ(t.depth_min, 0.4);
+    EXPECT_DOUBLE_EQ(t.depth_max, 9.0);
+    EXPECT_FALSE(t.depth_gt.defined());
+    EXPECT_EQ(t.network_views[0].image.size(0), 64);
+    std::vector<umvs::ViewInput> views = t.network_views;
+    views.insert(views.end(), t.loss_views.begin(), t.loss_views.end());
+    for (const auto& v : views)
+      for (const auto& h : held_cameras) EXPECT_FALSE(same_pose(v.camera, h)) << t.name;
+  }
+  // Held-out references are exactly the held-out keyframes.
+  for (size_t i = 0; i < held_out.size(); ++i) {
+    const auto t = held_out.tuple(i, nullptr);
+    bool found = false;
+    for (const auto& h : held_cameras) found |= same_pose(t.network_views[0].camera, h);
+    EXPECT_TRUE(found) << t.name;
+  }
+}
+
+TEST(BagTraining, SourcesAreTheBestScoringViewsAndSeeTheReference) {
+  // With the true depth the best source must reproduce the reference far better than a random
+  // pairing would: the ranking picks overlapping views.
+  const auto& room = logged_room();
+  auto config = room_config();
+  config.holdout_every = 0;
+  auto keyframes =
+      std::make_shared<const std::vector<umvs::BagKeyframe>>(umvs::read_bag_keyframes({room.bag}, config));
+  const umvs::BagSource all(keyframes, umvs::BagSplit::kAll, config, small_tuples());
+  ASSERT_EQ(all.size(), keyframes->size());
+  for (size_t i = 0; i < all.size(); ++i) {
+    const auto t = all.tuple(i, nullptr);
+    const auto& ref = t.network_views[0].camera;
+    const auto& src = t.network_views[1].camera;
+    // The best source's centre ray at mid-range lands inside its image.
+    const Eigen::Vector4d p_world = ref.T_cam_world.inverse() * Eigen::Vector4d(0, 0, 3.0, 1.0);
+    const Eigen::Vector3d p_src = src.K * (src.T_cam_world * p_world).head<3>();
+    ASSERT_GT(p_src.z(), 0) << t.name;
+    EXPECT_GE(p_src.x() / p_src.z(), 0) << t.name;
+    EXPECT_LT(p_src.x() / p_src.z(), src.width) << t.name;
+  }
+}
+
+TEST(BagTraining, UnusableInputIsRefusedWithTheReason) {
+  const auto& room = logged_room();
+  auto config = room_config();
+  config.topics.image = "/wrong/image";
+  try {
+    umvs::read_bag_keyframes({room.bag}, config);
+    FAIL() << "expected an error";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("/wrong/image"), std::string::npos) << e.what();
+  }
+  config = room_config();
+  config.depth_max = config.depth_min;
+  EXPECT_THROW(umvs::read_bag_keyframes({room.bag}, config), std::invalid_argument);
+  config = room_config();
+  config.keyframes.min_translation = 100.0;  // one keyframe only: no neighbours
+  config.keyframes.min_rotation_deg = 0;
+  auto keyframes =
+      std::make_shared<const std::vector<umvs::BagKeyframe>>(umvs::read_bag_keyframes({room.bag}, config));
+  EXPECT_EQ(keyframes->size(), 1u);
+  EXPECT_THROW(umvs::BagSource(keyframes, umvs::BagSplit::kTraining, config, small_tuples()), std::runtime_error);
+  EXPECT_THROW(umvs::read_bag_keyframes({room.bag + ".missing"}, room_config()), std::runtime_error);
+}
+
+TEST(BagTraining, UmvsTrainOnABagWritesModelsAndEvaluatesHeldOutKeyframes) {
+  const auto& room = logged_room();
+  const std::string out = umvs::test::temp_dir("bag_train_cli");
+  const std::string common = " --bag " + room.bag +
+                             " --min-translation 0.05 --depth-min 0.4 --depth-max 9 --holdout-every 4"
+                             " --width 64 --height 64 --num-depth 8 --views-loss 4 --threads 2";
+  const std::string train = umvs::test::umvs_binary() + " train" + common + " --steps 3 --save-every 3 --out " + out +
+                            "/run > " + out + "/train.txt 2>&1";
+  ASSERT_EQ(std::system(train.c_str()), 0) << train;
+  ASSERT_TRUE(std::filesystem::exists(out + "/run/best.pt"));
+  std::ifstream log(out + "/run/train_log.csv");
+  std::string header, line, last;
+  std::getline(log, header);
+  int rows = 0;
+  while (std::getline(log, line)) last = line, ++rows;
+  EXPECT_EQ(rows, 3);
+  // The last row carries a held-out validation (val_photometric is column 9).
+  std::vector<std::string> f;
+  std::stringstream ss(last);
+  for (std::string c; std::getline(ss, c, ',');) f.push_back(c);
+  ASSERT_GE(f.size(), 10u);
+  const double val_photometric = std::stod(f[8]);
+  EXPECT_GT(val_photometric, 0.0) << last;
+
+  const std::string eval = umvs::test::umvs_binary() + " train" + common + " --eval-only " + out +
+                           "/run/best.pt --out " + out + "/eval > " + out + "/eval.txt 2>&1";
+  ASSERT_EQ(std::system(eval.c_str()), 0) << eval;
+  std::ifstream csv(out + "/eval/eval.csv");
+  std::getline(csv, header);
+  std::getline(csv, line);
+  EXPECT_EQ(header.rfind("checkpoint,tuples,photometric", 0), 0u);
+  f.clear();
+  std::stringstream es(line);
+  for (std::string c; std::getline(es, c, ',');) f.push_back(c);
+  ASSERT_GE(f.size(), 3u);
+  EXPECT_GT(std::stoi(f[1]), 0);
+  // Same held-out keyframes, same model (best.pt is the only checkpoint): the validation of the
+  // last step and --eval-only agree.
+  EXPECT_NEAR(std::stod(f[2]), val_photometric, 1e-4 * val_photometric);
+}
+
+}  // namespace
