@@ -2,7 +2,7 @@
 # Installs everything unsup_mvs needs from Debian 12's apt. Idempotent: when every package is
 # already installed it returns in about a second without touching apt.
 #   scripts/install_deps.sh          build + test dependencies
-#   scripts/install_deps.sh --viz    also RViz and Xvfb (screenshots, desktop use)
+#   scripts/install_deps.sh --viz    also RViz, Xvfb and netpbm (headless screenshots, desktop use)
 set -euo pipefail
 
 PACKAGES=(
@@ -30,7 +30,7 @@ PACKAGES=(
   libnodeletlib-tools
 )
 if [[ "${1:-}" == "--viz" ]]; then
-  PACKAGES+=(rviz xvfb)
+  PACKAGES+=(rviz xvfb netpbm)  # netpbm: Xvfb framebuffer (XWD) -> PNG
 fi
 
 missing=()

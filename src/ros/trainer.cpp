@@ -60,21 +60,26 @@ bool readable_file(const std::string& path) {
   return fs::is_regular_file(path) && ::access(path.c_str(), R_OK) == 0;
 }
 
-std::string make_job_id() {
+// ft-YYYYmmdd-HHMMSS (UTC), with a suffix when a job of the same second already has a folder.
+std::string make_job_id(const std::string& output_dir) {
   char buf[32];
   const std::time_t now = std::time(nullptr);
   std::strftime(buf, sizeof(buf), "ft-%Y%m%d-%H%M%S", std::gmtime(&now));
-  return buf;
+  std::string id = buf;
+  for (int n = 2; fs::exists(output_dir + "/" + id); ++n) id = std::string(buf) + "-" + std::to_string(n);
+  return id;
 }
 
 }  // namespace
 
 Trainer::Trainer(ros::NodeHandle nh, ros::NodeHandle pnh) : nh_(nh), pnh_(pnh) {
   umvs_path_ = pnh_.param<std::string>("umvs_path", default_umvs_path());
-  output_dir_ = pnh_.param<std::string>("output_dir", std::string(std::getenv("HOME") ? std::getenv("HOME") : "/tmp") +
-                                                          "/.ros/unsup_mvs_models");
+  output_dir_ = pnh_.param<std::string>("output_dir", "");
+  if (output_dir_.empty()) {
+    output_dir_ = std::string(std::getenv("HOME") ? std::getenv("HOME") : "/tmp") + "/.ros/unsup_mvs_models";
+  }
   served_checkpoint_ = pnh_.param<std::string>("served_checkpoint", "");
-  reload_service_ = pnh_.param<std::string>("reload_service", "/inference/reload_model");
+  reload_service_ = pnh_.param<std::string>("reload_service", "/unsup_mvs/inference/reload_model");
   image_topic_ = pnh_.param<std::string>("image_topic", "/camera/image_rect_color");
   camera_info_topic_ = pnh_.param<std::string>("camera_info_topic", "/camera/camera_info");
   world_frame_ = pnh_.param<std::string>("world_frame", "world");
@@ -90,7 +95,7 @@ Trainer::Trainer(ros::NodeHandle nh, ros::NodeHandle pnh) : nh_(nh), pnh_(pnh) {
   fine_tune_srv_ = pnh_.advertiseService("fine_tune", &Trainer::on_fine_tune, this);
   cancel_srv_ = pnh_.advertiseService("cancel", &Trainer::on_cancel, this);
   status_srv_ = pnh_.advertiseService("status", &Trainer::on_status, this);
-  timer_ = nh_.createTimer(ros::Duration(pnh_.param("poll_period", 0.5)), &Trainer::on_timer, this);
+  timer_ = nh_.createWallTimer(ros::WallDuration(pnh_.param("poll_period", 0.5)), &Trainer::on_timer, this);
   ROS_INFO("trainer: ready (umvs %s, models into %s, serving %s)", umvs_path_.c_str(), output_dir_.c_str(),
            served_checkpoint_.empty() ? "<unknown>" : served_checkpoint_.c_str());
 }
@@ -127,7 +132,7 @@ bool Trainer::on_fine_tune(unsup_mvs::FineTune::Request& req, unsup_mvs::FineTun
     return refuse("the served model ~served_checkpoint '" + served_checkpoint_ + "' is unreadable: nothing to compare with");
   }
   if (req.steps < 0) return refuse("steps must not be negative");
-  const std::string job_id = make_job_id();
+  const std::string job_id = make_job_id(output_dir_);
   const std::string output = req.output.empty() ? output_dir_ + "/" + job_id + ".pt" : req.output;
   if (!path_inside(output, output_dir_)) return refuse("output '" + output + "' is outside the allowed folder " + output_dir_);
   if (fs::is_directory(output)) return refuse("output '" + output + "' is a folder");
@@ -225,7 +230,7 @@ void Trainer::start_evaluation(const std::string& checkpoint, const std::string&
   phase_ = phase;
 }
 
-void Trainer::on_timer(const ros::TimerEvent&) {
+void Trainer::on_timer(const ros::WallTimerEvent&) {
   if (phase_ == Phase::kIdle) return;
   std::string last_line;
   const bool alive = child_.poll([&](const std::string& line) {

@@ -28,7 +28,8 @@ double Progress::elapsed_seconds() const {
 
 void Progress::update(int64_t done, const std::string& extra) {
   const bool last = done >= total_;
-  if (!tty_ && !last && done - last_logged_ < log_every_ && last_logged_ >= 0) return;
+  // Off a terminal: one line every log_every items and one for the end, never the same item twice.
+  if (!tty_ && (done == last_logged_ || (!last && done - last_logged_ < log_every_ && last_logged_ >= 0))) return;
   last_logged_ = done;
   const double t = elapsed_seconds();
   const double per_item = done > 0 ? t / done : NAN;

@@ -32,7 +32,7 @@ class Trainer {
   bool on_fine_tune(unsup_mvs::FineTune::Request& req, unsup_mvs::FineTune::Response& res);
   bool on_cancel(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
   bool on_status(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
-  void on_timer(const ros::TimerEvent&);
+  void on_timer(const ros::WallTimerEvent&);
 
   std::vector<std::string> data_args() const;  // --bag ... and the topic/size options
   void start_evaluation(const std::string& checkpoint, const std::string& out_dir, Phase phase);
@@ -43,7 +43,7 @@ class Trainer {
   ros::NodeHandle nh_, pnh_;
   ros::ServiceServer fine_tune_srv_, cancel_srv_, status_srv_;
   ros::Publisher progress_pub_;
-  ros::Timer timer_;
+  ros::WallTimer timer_;  // wall time: jobs must progress when /clock stops (bag replay ended)
 
   // parameters
   std::string umvs_path_, output_dir_, served_checkpoint_, reload_service_;
