@@ -33,9 +33,12 @@ const LoggedScene& logged_room() {
     c.gt_cloud_samples = 0;
     l.scene = umvs::render_synthetic_scene(c);
     l.bag = umvs::test::temp_dir("bag_training") + "/room.bag";
-    umvs::BagWriter writer(l.bag);
+    umvs::BagTopics topics;
+    topics.depth = "/camera/depth";  // ground truth, read only when asked for
+    umvs::BagWriter writer(l.bag, topics);
     for (size_t i = 0; i < l.scene.views.size(); ++i) {
-      writer.write({100.0 + static_cast<double>(i), l.scene.views[i].image, l.scene.views[i].camera});
+      const auto& v = l.scene.views[i];
+      writer.write({100.0 + static_cast<double>(i), v.image, v.camera, v.depth});
     }
     writer.close();
     return l;
@@ -79,7 +82,33 @@ TEST(BagTraining, KeyframesFollowTheSelectorPolicyAndHoldOutEveryKth) {
     EXPECT_EQ(keyframes[k].frame, expected[k]);
     EXPECT_TRUE(same_pose(keyframes[k].image.camera, cameras[expected[k]]));
     EXPECT_EQ(keyframes[k].held_out, k % 4 == 3) << "keyframe " << k;
+    EXPECT_FALSE(keyframes[k].image.depth.defined()) << "no depth topic was asked for";
   }
+}
+
+TEST(BagTraining, GroundTruthDepthFromADepthTopicReachesTheTuples) {
+  const auto& room = logged_room();
+  auto config = room_config();
+  config.topics.depth = "/camera/depth";
+  auto keyframes =
+      std::make_shared<const std::vector<umvs::BagKeyframe>>(umvs::read_bag_keyframes({room.bag}, config));
+  for (const auto& k : *keyframes) {
+    ASSERT_TRUE(k.image.depth.defined());
+    EXPECT_TRUE(torch::equal(k.image.depth, room.scene.views[k.frame].depth)) << "frame " << k.frame;
+  }
+  auto tuples = small_tuples();
+  tuples.width = 128;  // the bag's size: no resampling, the ground truth must come through unchanged
+  tuples.height = 96;
+  const umvs::BagSource held_out(keyframes, umvs::BagSplit::kHeldOut, config, tuples);
+  ASSERT_GT(held_out.size(), 0u);
+  for (size_t i = 0; i < held_out.size(); ++i) {
+    const auto t = held_out.tuple(i, nullptr);
+    ASSERT_TRUE(t.depth_gt.defined());
+    bool matched = false;
+    for (const auto& v : room.scene.views) matched |= torch::equal(t.depth_gt, v.depth) && same_pose(v.camera, t.network_views[0].camera);
+    EXPECT_TRUE(matched) << t.name;
+  }
+  EXPECT_NE(held_out.description().find("with ground-truth depth"), std::string::npos) << held_out.description();
 }
 
 TEST(BagTraining, TrainingTuplesNeverTouchHeldOutKeyframes) {
@@ -170,6 +199,7 @@ TEST(BagTraining, UmvsTrainOnABagWritesModelsAndEvaluatesHeldOutKeyframes) {
   const std::string out = umvs::test::temp_dir("bag_train_cli");
   const std::string common = " --bag " + room.bag +
                              " --min-translation 0.05 --depth-min 0.4 --depth-max 9 --holdout-every 4"
+                             " --depth-topic /camera/depth"
                              " --width 64 --height 64 --num-depth 8 --views-loss 4 --threads 2";
   const std::string train = umvs::test::umvs_binary() + " train" + common + " --steps 3 --save-every 3 --out " + out +
                             "/run > " + out + "/train.txt 2>&1";
@@ -187,6 +217,8 @@ TEST(BagTraining, UmvsTrainOnABagWritesModelsAndEvaluatesHeldOutKeyframes) {
   for (std::string c; std::getline(ss, c, ',');) f.push_back(c);
   ASSERT_GE(f.size(), 10u);
   const double val_photometric = std::stod(f[8]);
+  ASSERT_GE(f.size(), 11u) << last;
+  EXPECT_GT(std::stod(f[10]), 0.0) << "validation against the bag's ground truth (val_abs_err): " << last;
   EXPECT_GT(val_photometric, 0.0) << last;
 
   const std::string eval = umvs::test::umvs_binary() + " train" + common + " --eval-only " + out +
@@ -201,6 +233,8 @@ TEST(BagTraining, UmvsTrainOnABagWritesModelsAndEvaluatesHeldOutKeyframes) {
   for (std::string c; std::getline(es, c, ',');) f.push_back(c);
   ASSERT_GE(f.size(), 3u);
   EXPECT_GT(std::stoi(f[1]), 0);
+  ASSERT_GE(f.size(), 7u);
+  EXPECT_GT(std::stod(f[6]), 0.0) << "the held-out keyframes have ground truth: abs_err expected";
   // Same held-out keyframes, same model (best.pt is the only checkpoint): the validation of the
   // last step and --eval-only agree.
   EXPECT_NEAR(std::stod(f[2]), val_photometric, 1e-4 * val_photometric);

@@ -11,6 +11,7 @@
 #include <filesystem>
 #include <iterator>
 #include <map>
+#include <memory>
 #include <stdexcept>
 
 #include "unsup_mvs/io/bag_messages.h"
@@ -66,6 +67,12 @@ void BagWriter::write(const PosedImage& frame) {
   bag_->write("/tf", t, tfm);
   bag_->write(topics_.camera_info, t, camera_info_from_camera(frame.camera, header));
   bag_->write(topics_.image, t, rgb8_to_image_msg(frame.image, header));
+  if (!topics_.depth.empty() && frame.depth.defined()) {
+    if (frame.depth.dim() != 2 || frame.depth.size(0) != frame.camera.height || frame.depth.size(1) != frame.camera.width) {
+      throw std::invalid_argument("frame " + std::to_string(frames_) + ": depth size does not match its camera");
+    }
+    bag_->write(topics_.depth, t, float_to_image_msg(frame.depth.to(torch::kFloat32).contiguous(), header));
+  }
   ++frames_;
 }
 
@@ -111,6 +118,16 @@ BagReadStats for_each_posed_image(const std::string& path, const BagTopics& topi
     rosbag::View info_view(bag, rosbag::TopicQuery(topics.camera_info));
     for (const rosbag::MessageInstance& m : info_view) {
       if (auto i = m.instantiate<sensor_msgs::CameraInfo>()) infos[i->header.stamp] = i;
+    }
+    // Depth maps by header stamp; only their place in the bag is kept (a map is read again when
+    // an image of its stamp is used), so memory does not grow with the log.
+    std::map<ros::Time, rosbag::MessageInstance> depths;
+    std::unique_ptr<rosbag::View> depth_view;
+    if (!topics.depth.empty()) {
+      depth_view = std::make_unique<rosbag::View>(bag, rosbag::TopicQuery(topics.depth));
+      for (const rosbag::MessageInstance& m : *depth_view) {
+        if (auto d = m.instantiate<sensor_msgs::Image>()) depths.emplace(d->header.stamp, m);
+      }
     }
     // Pass 2: images.
     rosbag::View view(bag, rosbag::TopicQuery(topics.image));
@@ -158,6 +175,21 @@ BagReadStats for_each_posed_image(const std::string& path, const BagTopics& topi
         ++stats.invalid;
         note(e.what());
         continue;
+      }
+      const auto d = depths.find(img->header.stamp);
+      if (d != depths.end()) {
+        if (auto depth_msg = d->second.instantiate<sensor_msgs::Image>()) {
+          try {
+            out.depth = image_msg_to_float(*depth_msg);
+            if (out.depth.size(0) != out.camera.height || out.depth.size(1) != out.camera.width) {
+              throw std::invalid_argument("depth map size differs from the image's");
+            }
+            ++stats.with_depth;
+          } catch (const std::invalid_argument& e) {
+            out.depth = torch::Tensor();
+            note(std::string("depth on ") + topics.depth + " ignored: " + e.what());
+          }
+        }
       }
       ++stats.used;
       if (!on_image(out)) break;

@@ -56,6 +56,7 @@ std::vector<BagKeyframe> read_bag_keyframes(const std::vector<std::string>& bags
     if (log) {
       *log << bags[b] << ": " << stats.used << " posed images of " << stats.images << ", " << kept << " keyframes ("
            << held_out << " held out)";
+      if (!config.topics.depth.empty()) *log << ", " << stats.with_depth << " images with depth";
       if (stats.used < stats.images) *log << "; skipped: " << stats.first_error;
       *log << "\n";
     }
@@ -114,7 +115,7 @@ TrainingTuple BagSource::tuple(size_t index, std::mt19937_64* rng) const {
   const BagKeyframe& ref = all[e.ref];
   return make_training_tuple("bag " + std::to_string(ref.bag) + " frame " + std::to_string(ref.frame),
                              {ref.image.image, ref.image.camera}, sources, config_.depth_min, config_.depth_max,
-                             torch::Tensor(), tuple_config_, rng);
+                             ref.image.depth, tuple_config_, rng);
 }
 
 std::string BagSource::description() const {
@@ -122,7 +123,11 @@ std::string BagSource::description() const {
   s << entries_.size() << (split_ == BagSplit::kHeldOut ? " held-out" : split_ == BagSplit::kTraining ? " training" : "")
     << " keyframe tuples from " << keyframes_->size() << " keyframes";
   if (skipped_ > 0) s << " (" << skipped_ << " with too few neighbours skipped)";
-  s << ", depth " << config_.depth_min << "-" << config_.depth_max << " m, no ground truth";
+  size_t with_gt = 0;
+  for (const auto& e : entries_) with_gt += (*keyframes_)[e.ref].image.depth.defined();
+  s << ", depth " << config_.depth_min << "-" << config_.depth_max << " m, ";
+  if (with_gt == 0) s << "no ground truth";
+  else s << with_gt << " with ground-truth depth (" << config_.topics.depth << ")";
   return s.str();
 }
 

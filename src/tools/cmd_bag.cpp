@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <iostream>
 
+#include "unsup_mvs/io/array_io.h"
 #include "unsup_mvs/io/bag_io.h"
 #include "unsup_mvs/io/mvs_folder.h"
 #include "unsup_mvs/tools/args.h"
@@ -25,13 +26,16 @@ UMVS_COMMAND(bag, "MVSNet-format folder -> rosbag (Image, CameraInfo, /tf); --in
       .option("image-topic", "/camera/image_rect_color", "image topic")
       .option("info-topic", "/camera/camera_info", "CameraInfo topic")
       .option("world-frame", "world", "fixed frame of the poses")
-      .option("camera-frame", "camera_optical_frame", "the camera's optical frame");
+      .option("camera-frame", "camera_optical_frame", "the camera's optical frame")
+      .option("depth-topic", "", "also write DIR/depth_gt as 32FC1 depth (m) on this topic, e.g. /camera/depth "
+                                 "(ground truth for validation); with --inspect: count the depth maps on it");
   if (!args.parse(argc, argv)) return 0;
   umvs::BagTopics topics;
   topics.image = args.str("image-topic");
   topics.camera_info = args.str("info-topic");
   topics.world_frame = args.str("world-frame");
   topics.camera_frame = args.str("camera-frame");
+  topics.depth = args.str("depth-topic");
 
   if (args.given("inspect")) {
     size_t n = 0;
@@ -48,6 +52,7 @@ UMVS_COMMAND(bag, "MVSNet-format folder -> rosbag (Image, CameraInfo, /tf); --in
     });
     std::cout << args.str("inspect") << ": " << stats.images << " images on " << topics.image << ", " << stats.used
               << " posed and calibrated";
+    if (!topics.depth.empty()) std::cout << ", " << stats.with_depth << " with depth on " << topics.depth;
     if (n) std::printf(" (%dx%d, %.1f s, %.2f Hz)", first_cam.width, first_cam.height, last - first,
                        n > 1 ? (n - 1) / (last - first) : 0.0);
     std::cout << "\n";
@@ -77,13 +82,19 @@ UMVS_COMMAND(bag, "MVSNet-format folder -> rosbag (Image, CameraInfo, /tf); --in
   umvs::Progress progress("bag", static_cast<int64_t>(ids.size()));
   for (size_t i = 0; i < ids.size(); ++i) {
     const umvs::MvsView v = folder.load_view(ids[i]);
-    writer.write({start + i / rate, v.image, v.cam.camera});
+    umvs::PosedImage frame{start + i / rate, v.image, v.cam.camera};
+    if (!topics.depth.empty()) {
+      const std::string gt = folder.depth_gt_path(ids[i]);
+      if (gt.empty()) throw std::runtime_error("--depth-topic: view " + std::to_string(ids[i]) + " has no depth_gt");
+      frame.depth = umvs::read_pfm(gt);
+    }
+    writer.write(frame);
     progress.update(static_cast<int64_t>(i + 1));
   }
   writer.close();
   progress.finish();
   std::cout << "wrote " << writer.frames() << " frames (" << ids.size() / rate << " s at " << rate << " Hz) to "
             << args.str("out") << ": " << topics.image << ", " << topics.camera_info << ", /tf " << topics.world_frame
-            << " -> " << topics.camera_frame << "\n";
+            << " -> " << topics.camera_frame << (topics.depth.empty() ? "" : ", " + topics.depth) << "\n";
   return 0;
 }

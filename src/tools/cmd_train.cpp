@@ -149,6 +149,7 @@ Data open_bags(const umvs::Args& args, const umvs::TupleConfig& config, bool eva
   bag.topics.image = args.str("image-topic");
   bag.topics.camera_info = args.str("camera-info-topic");
   bag.topics.world_frame = args.str("world-frame");
+  bag.topics.depth = args.str("depth-topic");
   bag.rectified = args.integer("rectified") != 0;
   bag.keyframes.min_translation = args.real("min-translation");
   bag.keyframes.min_rotation_deg = args.real("min-rotation-deg");
@@ -199,6 +200,7 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
       .option("image-topic", "/camera/image_rect_color", "--bag: sensor_msgs/Image topic (rgb8, bgr8, mono8, ...)")
       .option("camera-info-topic", "/camera/camera_info", "--bag: sensor_msgs/CameraInfo topic")
       .option("world-frame", "world", "--bag: fixed tf frame of the camera poses")
+      .option("depth-topic", "", "--bag: 32FC1 ground-truth depth topic, only for validation errors (\"\" = none)")
       .option("rectified", "1", "--bag: 1 = images are rectified (intrinsics from P), 0 = from K")
       .option("min-translation", "0.10", "--bag: metres between keyframes (as the keyframe_selector)")
       .option("min-rotation-deg", "10", "--bag: or degrees between keyframes")

@@ -26,12 +26,16 @@ struct BagTopics {
   std::string camera_info = "/camera/camera_info";
   std::string world_frame = "world";
   std::string camera_frame = "camera_optical_frame";  // used when writing, and when an image has no frame_id
+  // Optional ground truth: sensor_msgs/Image 32FC1 z-depth in metres (0 = unknown), registered to
+  // the image and stamped like it. "" = none (read: ignored; write: not written).
+  std::string depth;
 };
 
 struct PosedImage {
   double stamp = 0.0;    // seconds
   torch::Tensor image;   // uint8 [H,W,3] RGB
   Camera camera;         // intrinsics, size and T_cam_world
+  torch::Tensor depth;   // float32 [H,W] metres, when topics.depth is set and has a message at the stamp
 };
 
 // Writes a log. The bag is written to a temporary file beside `path` and renamed by close(), so
@@ -62,6 +66,7 @@ struct BagReadStats {
   size_t without_info = 0;    // no CameraInfo on the info topic at all
   size_t without_pose = 0;    // no transform world_frame -> camera at the image stamp
   size_t invalid = 0;         // unsupported encoding, bad calibration, NaN pose...
+  size_t with_depth = 0;      // delivered images that came with a depth map (topics.depth)
   std::string first_error;    // the first of those problems, for the user
 };
 
