@@ -63,6 +63,18 @@ TEST(HomographyWarp, FrontoParallelPlaneShiftsByDisparity) {
   EXPECT_NEAR(warped[0][0][0][6][8].item<double>(), expected, 1e-4);
 }
 
+TEST(HomographyWarp, PointsOnTheSourceCameraPlaneSampleNothingInsteadOfNaN) {
+  // Reference: identity projection, pixel (x, y) at depth d is (x d, y d, d). Source: x and z
+  // swapped, so the reference's column x = 0 lies exactly on the source's z = 0 plane (x/0).
+  auto fea = torch::ones({1, 2, 6, 8});
+  auto ref = torch::eye(4).unsqueeze(0);
+  auto src = torch::tensor({0.f, 0.f, 1.f, 0.f, 0.f, 1.f, 0.f, 0.f, 1.f, 0.f, 0.f, 0.f, 0.f, 0.f, 0.f, 1.f}).view({1, 4, 4});
+  auto dv = depth_hypotheses(1.0, 2.0, 4, DepthSampling::kUniformDepth).unsqueeze(0);
+  auto warped = homography_warp(fea, src, ref, dv);
+  EXPECT_TRUE(torch::isfinite(warped).all().item<bool>());
+  EXPECT_EQ(warped.select(4, 0).abs().max().item<float>(), 0.0f);  // out of view: zero padding
+}
+
 TEST(InverseWarp, RecoversTheReferenceFromATranslatedView) {
   // A source image made of a smooth pattern; the reference is the source warped with known depth.
   const int W = 40, H = 30;

@@ -82,6 +82,51 @@ TEST(TrainingData, CroppedTuplesKeepGeometryConsistent) {
   EXPECT_THROW(MvsFolderSource({dir}, bad), std::invalid_argument);
 }
 
+TEST(Training, ABrokenBatchLeavesTheModelUntouched) {
+  // A NaN weight in the first convolution makes the forward pass NaN. The step must report a
+  // non-finite loss and change neither the weights nor the BatchNorm running statistics (which
+  // the forward pass updates in training mode: NaN there would ruin every later evaluation).
+  const std::string dir = write_scene("broken", 64, 64, 5, 3);
+  TupleConfig dcfg;
+  dcfg.views_in = 3;
+  dcfg.views_loss = 2;
+  dcfg.width = 64;
+  dcfg.height = 64;
+  MvsFolderSource source({dir}, dcfg);
+  torch::manual_seed(0);
+  MvsNetConfig mcfg;
+  mcfg.num_depth = 8;
+  MvsNet model(mcfg);
+  TrainerConfig tcfg;
+  tcfg.num_depth = 8;
+  tcfg.loss.top_k = 2;
+  Trainer trainer(model, torch::kCPU, tcfg);
+  auto first = model->parameters()[0];
+  const auto first_good = first.clone();
+  {
+    torch::NoGradGuard no_grad;
+    first.view({-1})[0] = NAN;
+  }
+  std::vector<torch::Tensor> before;
+  for (const auto& t : model->parameters()) before.push_back(t.clone());
+  std::vector<torch::Tensor> buffers_before;
+  for (const auto& t : model->buffers()) buffers_before.push_back(t.clone());
+  ASSERT_FALSE(buffers_before.empty());
+  const auto v = trainer.step({source.tuple(0, nullptr)});
+  EXPECT_FALSE(std::isfinite(v.total));
+  const auto buffers = model->buffers();
+  for (size_t i = 0; i < buffers.size(); ++i) EXPECT_TRUE(torch::equal(buffers_before[i], buffers[i])) << "buffer " << i;
+  const auto params = model->parameters();
+  for (size_t i = 1; i < params.size(); ++i) EXPECT_TRUE(torch::equal(before[i], params[i])) << "parameter " << i;
+  // Repaired, the same batch trains.
+  {
+    torch::NoGradGuard no_grad;
+    first.copy_(first_good);
+  }
+  EXPECT_TRUE(std::isfinite(trainer.step({source.tuple(0, nullptr)}).total));
+  EXPECT_FALSE(torch::equal(before[1], model->parameters()[1]));
+}
+
 TEST(Training, ShortRunFromRandomWeightsReducesDepthError) {
   // 160x128 input, 32 planes, a single room scene without lighting change, robust loss.
   const std::string dir = write_scene("learn", 160, 128, 8, 4);

@@ -111,20 +111,24 @@ torch::Tensor homography_warp(const torch::Tensor& src_fea, const torch::Tensor&
   torch::Tensor sample_grid;
   {
     torch::NoGradGuard no_grad;  // the sampling grid depends on cameras only: no gradient needed
-  auto proj = torch::matmul(src_proj, torch::inverse(ref_proj));
-  auto rot = proj.slice(1, 0, 3).slice(2, 0, 3);    // [B,3,3]
-  auto trans = proj.slice(1, 0, 3).slice(2, 3, 4);  // [B,3,1]
-  auto opts = src_fea.options();
-  auto grid = torch::meshgrid({torch::arange(H, opts), torch::arange(W, opts)}, "ij");
-  auto y = grid[0].reshape({H * W}), x = grid[1].reshape({H * W});
-  auto xyz = torch::stack({x, y, torch::ones_like(x)}).unsqueeze(0).expand({B, 3, H * W});
-  auto rot_xyz = torch::matmul(rot, xyz);                                              // [B,3,HW]
-  auto rot_depth_xyz = rot_xyz.unsqueeze(2) * depth_values.view({B, 1, D, 1});       // [B,3,D,HW]
-  auto proj_xyz = rot_depth_xyz + trans.view({B, 3, 1, 1});
-  auto proj_xy = proj_xyz.slice(1, 0, 2) / proj_xyz.slice(1, 2, 3);
-  auto gx = proj_xy.select(1, 0) / ((W - 1) / 2.0) - 1;
-  auto gy = proj_xy.select(1, 1) / ((H - 1) / 2.0) - 1;
+    auto proj = torch::matmul(src_proj, torch::inverse(ref_proj));
+    auto rot = proj.slice(1, 0, 3).slice(2, 0, 3);    // [B,3,3]
+    auto trans = proj.slice(1, 0, 3).slice(2, 3, 4);  // [B,3,1]
+    auto opts = src_fea.options();
+    auto grid = torch::meshgrid({torch::arange(H, opts), torch::arange(W, opts)}, "ij");
+    auto y = grid[0].reshape({H * W}), x = grid[1].reshape({H * W});
+    auto xyz = torch::stack({x, y, torch::ones_like(x)}).unsqueeze(0).expand({B, 3, H * W});
+    auto rot_xyz = torch::matmul(rot, xyz);                                         // [B,3,HW]
+    auto rot_depth_xyz = rot_xyz.unsqueeze(2) * depth_values.view({B, 1, D, 1});  // [B,3,D,HW]
+    auto proj_xyz = rot_depth_xyz + trans.view({B, 3, 1, 1});
+    auto proj_xy = proj_xyz.slice(1, 0, 2) / proj_xyz.slice(1, 2, 3);
+    auto gx = proj_xy.select(1, 0) / ((W - 1) / 2.0) - 1;
+    auto gy = proj_xy.select(1, 1) / ((H - 1) / 2.0) - 1;
     sample_grid = torch::stack({gx, gy}, 3);  // [B,D,HW,2]
+    // A point on the source camera's plane (z = 0) divides to inf/NaN, and grid_sample turns that
+    // into NaN features; send it outside the image instead (zero padding, like any point out of view).
+    // Finite coordinates are left exactly as MVSNet computes them.
+    sample_grid = torch::where(torch::isfinite(sample_grid), sample_grid, torch::full_like(sample_grid, -2.0));
   }
   auto warped = F::grid_sample(src_fea, sample_grid.view({B, D * H, W, 2}),
                                F::GridSampleFuncOptions()

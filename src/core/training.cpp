@@ -159,12 +159,21 @@ Trainer::Trainer(MvsNet model, torch::Device device, TrainerConfig config)
 LossValues Trainer::step(const std::vector<TrainingTuple>& tuples) {
   model_->train();
   const auto b = make_training_batch(tuples, config_.num_depth, model_->config().depth_sampling, device_);
+  // BatchNorm updates its running statistics in the forward pass: keep them, so that a batch that
+  // turns out broken leaves no trace (NaN statistics would ruin every later evaluation).
+  std::vector<torch::Tensor> buffers_before;
+  for (const auto& buffer : model_->buffers()) buffers_before.push_back(buffer.clone());
   const auto out = model_->forward(b.images, b.proj, b.depth_values);
   const auto terms = unsupervised_loss(b.loss_ref, b.loss_src, b.K_ref, b.K_src, b.T_src_ref, out.depth, config_.loss);
   LossValues values;
   values.add(terms);
   optimizer_->zero_grad();
-  if (!std::isfinite(values.total)) return values;  // no update from a broken batch; the caller reports it
+  if (!std::isfinite(values.total)) {  // no update from a broken batch; the caller reports it
+    torch::NoGradGuard no_grad;
+    auto buffers = model_->buffers();
+    for (size_t i = 0; i < buffers.size(); ++i) buffers[i].copy_(buffers_before[i]);
+    return values;
+  }
   terms.total.backward();
   optimizer_->step();
   return values;
