@@ -72,7 +72,9 @@ done
 sleep 8  # the last keyframe set through inference and fusion
 say "bag done; saving the fused cloud"
 rosservice call /unsup_mvs/fusion/save_cloud "path: '$WORK/cloud.ply'"
-grep -E "inference: keyframe|fusion: depth estimate" "$WORK/ros/log/latest/rosout.log" 2>/dev/null | tail -2 | cut -c1-200 || true
+# The nodes' last words (rosout.log: "stamp LEVEL node [file] [topics: ...] message").
+grep -E "inference: keyframe|fusion: depth estimate" "$WORK/ros/log/latest/rosout.log" 2>/dev/null | tail -2 |
+  sed -E 's/^.*\[topics: [^]]*\] /  /' || true
 shot=""
 if [[ "$RVIZ" == 1 ]] && xwdtopnm "$WORK/xvfb/Xvfb_screen0" 2>/dev/null | pnmtopng >"$WORK/rviz.png" 2>/dev/null; then
   shot=$WORK/rviz.png

@@ -82,7 +82,10 @@ UMVS_COMMAND(bag, "MVSNet-format folder -> rosbag (Image, CameraInfo, /tf); --in
   umvs::Progress progress("bag", static_cast<int64_t>(ids.size()));
   for (size_t i = 0; i < ids.size(); ++i) {
     const umvs::MvsView v = folder.load_view(ids[i]);
-    umvs::PosedImage frame{start + i / rate, v.image, v.cam.camera};
+    umvs::PosedImage frame;
+    frame.stamp = start + i / rate;
+    frame.image = v.image;
+    frame.camera = v.cam.camera;
     if (!topics.depth.empty()) {
       const std::string gt = folder.depth_gt_path(ids[i]);
       if (gt.empty()) throw std::runtime_error("--depth-topic: view " + std::to_string(ids[i]) + " has no depth_gt");
