@@ -1,5 +1,6 @@
 // rostest for the trainer node (FineTune.srv): bad requests are refused with the reason; a killed
-// training process leaves the served model, inference and fusion untouched; a fine-tuning job on
+// training process leaves the served model, inference and fusion untouched; cancel and status
+// work and one job runs at a time; a fine-tuning job on
 // a synthetic bag whose appearance differs from the model's training data (low-contrast textures,
 // specular highlights) reloads inference with a model whose depth error against ground truth is
 // lower than the served one's.
@@ -246,6 +247,31 @@ TEST_F(TrainerTest, KillingTheTrainingProcessLeavesInferenceAndFusionUntouched) 
   ASSERT_TRUE(wait_for([&] { return !estimates_.empty() && !inference_checkpoint_.empty(); }, 60.0))
       << "inference no longer answers";
   EXPECT_EQ(inference_checkpoint_, work_ + "/served.pt");
+}
+
+TEST_F(TrainerTest, CancelStopsTheJobAndTheStatusSaysSo) {
+  const auto r = fine_tune({work_ + "/scene.bag"}, 100000);
+  ASSERT_TRUE(r.accepted) << r.message;
+  const auto busy = fine_tune({work_ + "/scene.bag"}, 10);  // one job at a time
+  EXPECT_FALSE(busy.accepted);
+  EXPECT_NE(busy.message.find("still running"), std::string::npos) << busy.message;
+  std_srvs::Trigger status;
+  ASSERT_TRUE(status_.call(status));
+  EXPECT_TRUE(status.response.success) << status.response.message;
+  EXPECT_NE(status.response.message.find(r.job_id), std::string::npos) << status.response.message;
+
+  std_srvs::Trigger cancel;
+  ASSERT_TRUE(ros::service::call("/trainer/cancel", cancel));
+  EXPECT_TRUE(cancel.response.success) << cancel.response.message;
+  const auto last = wait_final(r.job_id, 10.0);
+  ASSERT_TRUE(last);
+  EXPECT_EQ(last->state, "cancelled");
+  EXPECT_NE(run("pgrep -f '[u]mvs train.*" + r.job_id + "' > /dev/null"), 0) << "the training process survived";
+  ASSERT_TRUE(status_.call(status));
+  EXPECT_FALSE(status.response.success) << status.response.message;
+  EXPECT_EQ(read_bytes(work_ + "/served.pt"), served_bytes_);
+  ASSERT_TRUE(ros::service::call("/trainer/cancel", cancel));
+  EXPECT_FALSE(cancel.response.success) << "nothing left to cancel";
 }
 
 TEST_F(TrainerTest, FineTuningReloadsABetterModel) {
