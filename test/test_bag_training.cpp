@@ -148,9 +148,9 @@ TEST(BagTraining, TrainingTuplesNeverTouchHeldOutKeyframes) {
   }
 }
 
-TEST(BagTraining, SourcesAreTheBestScoringViewsAndSeeTheReference) {
-  // With the true depth the best source must reproduce the reference far better than a random
-  // pairing would: the ranking picks overlapping views.
+TEST(BagTraining, TheBestSourceSeesTheReferenceCentre) {
+  // The ranking must pick overlapping views: the point 3 m along the reference's optical axis
+  // (inside every room) projects into the best source's image.
   const auto& room = logged_room();
   auto config = room_config();
   config.holdout_every = 0;

@@ -267,6 +267,9 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
   }
   const bool from_bags = args.given("bag");
   if (from_bags == args.given("data")) throw std::invalid_argument("give either --data folders or --bag files");
+  if (from_bags && args.given("val")) {
+    throw std::invalid_argument("--val folders cannot be mixed with --bag (held-out keyframes validate; see --holdout-every)");
+  }
   const bool eval_only = args.given("eval-only");
   Data data = from_bags ? open_bags(args, data_cfg, eval_only) : open_folders(args, data_cfg);
   // --eval-only scores held-out bag keyframes, or the --data folders themselves.
@@ -300,7 +303,6 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
   if (out.empty()) throw std::invalid_argument("--out is required for training");
   umvs::make_directories(out);
   const std::string last_path = out + "/last.pt", best_path = out + "/best.pt", log_path = out + "/train_log.csv";
-  if (from_bags && args.given("val")) throw std::invalid_argument("--val folders cannot be mixed with --bag");
   const umvs::TupleSource& source = *data.train;
   std::vector<umvs::TrainingTuple> val_tuples;
   if (data.held_out) {
