@@ -10,6 +10,28 @@ namespace umvs {
 namespace nn = torch::nn;
 namespace F = torch::nn::functional;
 
+const char* to_string(InputNormalization n) {
+  switch (n) {
+    case InputNormalization::kNone: return "none";
+    case InputNormalization::kPerImageChannel: return "per_image_channel";
+  }
+  return "?";
+}
+
+InputNormalization input_normalization_from_string(const std::string& name) {
+  if (name == "none") return InputNormalization::kNone;
+  if (name == "per_image_channel") return InputNormalization::kPerImageChannel;
+  throw std::invalid_argument("input normalisation must be none or per_image_channel, got '" + name + "'");
+}
+
+torch::Tensor normalize_input_images(const torch::Tensor& images, InputNormalization normalization) {
+  if (normalization == InputNormalization::kNone) return images;
+  // The variance floor keeps a flat (or black) image finite: it maps to zeros.
+  auto mean = images.mean({-2, -1}, /*keepdim=*/true);
+  auto var = images.var({-2, -1}, /*unbiased=*/false, /*keepdim=*/true);
+  return (images - mean) * torch::rsqrt(var + 1e-6);
+}
+
 void MvsNetConfig::validate() const {
   if (num_depth < 8 || num_depth % 8 != 0) {
     throw std::invalid_argument("num_depth must be a positive multiple of 8 (the 3-D U-Net halves it "
@@ -29,7 +51,8 @@ std::string MvsNetConfig::architecture_mismatch(const MvsNetConfig& other) const
 std::string MvsNetConfig::to_string() const {
   std::ostringstream os;
   os << "num_depth=" << num_depth << " depth_sampling=" << umvs::to_string(depth_sampling)
-     << " refine=" << (refine ? "true" : "false") << " num_views=" << num_views;
+     << " refine=" << (refine ? "true" : "false") << " num_views=" << num_views
+     << " input_normalization=" << umvs::to_string(input_normalization);
   return os.str();
 }
 
@@ -145,7 +168,7 @@ MvsOutput MvsNetImpl::forward(const torch::Tensor& images, const torch::Tensor& 
   const int64_t B = images.size(0), V = images.size(1);
 
   // Shared feature extractor over all views at once.
-  auto features = feature(images.flatten(0, 1));  // [B*V,32,h,w]
+  auto features = feature(normalize_input_images(images.flatten(0, 1), config_.input_normalization));  // [B*V,32,h,w]
   features = features.view({B, V, features.size(1), features.size(2), features.size(3)});
   const int64_t D = depth_values.size(1);
 

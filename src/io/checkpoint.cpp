@@ -34,6 +34,7 @@ c10::impl::GenericDict config_to_dict(const MvsNetConfig& c) {
   d.insert("depth_sampling", std::string(to_string(c.depth_sampling)));
   d.insert("refine", c.refine);
   d.insert("num_views", static_cast<int64_t>(c.num_views));
+  d.insert("input_normalization", std::string(to_string(c.input_normalization)));
   return d;
 }
 
@@ -44,6 +45,10 @@ MvsNetConfig config_from_dict(const c10::impl::GenericDict& d, const std::string
     c.depth_sampling = depth_sampling_from_string(d.at("depth_sampling").toStringRef());
     c.refine = d.at("refine").toBool();
     c.num_views = static_cast<int>(d.at("num_views").toInt());
+    // Checkpoints written before the field existed were trained on raw [0,1] images.
+    if (d.contains("input_normalization")) {
+      c.input_normalization = input_normalization_from_string(d.at("input_normalization").toStringRef());
+    }
   } catch (const std::exception& e) {
     throw std::runtime_error("checkpoint '" + path + "': malformed network config");
   }

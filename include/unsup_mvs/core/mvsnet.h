@@ -15,6 +15,20 @@
 
 namespace umvs {
 
+// What the network does to its input images (colours in [0,1]) before the 2-D feature net.
+enum class InputNormalization {
+  kNone,              // as given (MVSNet_pytorch; its published weights expect this)
+  kPerImageChannel,   // each view and colour channel to zero mean and unit variance: exposure,
+                      // gain and white balance of the camera drop out (original MVSNet's
+                      // center_image, per channel)
+};
+const char* to_string(InputNormalization n);
+// "none" | "per_image_channel"; throws std::invalid_argument listing the accepted names.
+InputNormalization input_normalization_from_string(const std::string& name);
+
+// images [...,3,H,W] -> the same shape, normalised per image and channel over H x W.
+torch::Tensor normalize_input_images(const torch::Tensor& images, InputNormalization normalization);
+
 struct MvsNetConfig {
   // Depth hypotheses per reference view. The U-Net needs a multiple of 8. Not a property of the
   // weights: a model trained with 128 planes can run with 192 or 64.
@@ -24,6 +38,8 @@ struct MvsNetConfig {
   bool refine = false;
   // Views the network sees per depth map (reference + sources). Any V >= 2 works at inference.
   int num_views = 3;
+  // Not a property of the weights' shapes but of what they were trained on: saved with checkpoints.
+  InputNormalization input_normalization = InputNormalization::kNone;
 
   // Throws std::invalid_argument naming the bad field.
   void validate() const;
