@@ -39,6 +39,18 @@ torch::Tensor depth_hypotheses(double depth_min, double depth_max, int num_depth
   return values.to(torch::kFloat32);
 }
 
+torch::Tensor depth_to_plane_index(const torch::Tensor& depth, const torch::Tensor& depth_values,
+                                   DepthSampling sampling) {
+  const int64_t B = depth.size(0), D = depth_values.size(1);
+  std::vector<int64_t> shape(depth.dim(), 1);
+  shape[0] = B;
+  auto first = depth_values.select(1, 0).view(shape), last = depth_values.select(1, D - 1).view(shape);
+  if (sampling == DepthSampling::kUniformInverseDepth) {
+    return (1.0 / first - 1.0 / depth) / (1.0 / first - 1.0 / last) * static_cast<double>(D - 1);
+  }
+  return (depth - first) / (last - first) * static_cast<double>(D - 1);
+}
+
 torch::Tensor mvsnet_projection_matrix(const Camera& camera, double scale) {
   // float32 arithmetic exactly as MVSNet's data loaders (numpy: K4 = K with rows 0-1 scaled,
   // P = K4 @ E[:3,:4], each product and each sum rounded to float, left to right, no FMA), so

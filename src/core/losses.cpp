@@ -128,6 +128,19 @@ torch::Tensor ssim_loss(const torch::Tensor& ref, const torch::Tensor& warped, c
   return (map * mask).sum() / mask.sum().clamp_min(1.0);
 }
 
+torch::Tensor supervised_depth_loss(const torch::Tensor& depth, const torch::Tensor& gt,
+                                    const torch::Tensor& depth_values, DepthSampling sampling) {
+  TORCH_CHECK(depth.sizes() == gt.sizes(), "depth and ground truth differ in shape: ", depth.sizes(), " vs ",
+              gt.sizes());
+  const auto mask = gt > 0;
+  if (!mask.any().item<bool>()) return depth.sum() * 0.0;  // keeps the graph (and the device)
+  // Ground-truth-less pixels get the estimate itself as target, so that 1/gt stays finite there.
+  const auto target = torch::where(mask, gt, depth.detach());
+  const auto est_index = depth_to_plane_index(depth, depth_values, sampling).masked_select(mask);
+  const auto gt_index = depth_to_plane_index(target, depth_values, sampling).masked_select(mask);
+  return torch::nn::functional::smooth_l1_loss(est_index, gt_index);
+}
+
 torch::Tensor smoothness_loss(const torch::Tensor& depth, const torch::Tensor& image) {
   auto d = depth.unsqueeze(1);
   d = d / d.mean({2, 3}, /*keepdim=*/true).clamp_min(1e-6);

@@ -23,6 +23,13 @@ DepthSampling depth_sampling_from_string(const std::string& s);  // "depth" | "i
 torch::Tensor depth_hypotheses(double depth_min, double depth_max, int num_depth,
                                DepthSampling sampling);
 
+// The continuous plane index of depths among hypotheses spanning depth_values' first to last
+// entry with `sampling` (0 at the first plane, D-1 at the last; linear in depth or in 1/depth):
+// errors in these units are errors in depth intervals, whatever the scene's scale.
+//   depth [B,...] (> 0); depth_values [B,D]  -> [B,...]
+torch::Tensor depth_to_plane_index(const torch::Tensor& depth, const torch::Tensor& depth_values,
+                                   DepthSampling sampling);
+
 // 4x4 [[K' R, K' t], [0 0 0 1]] with K' = K whose first two rows are multiplied by `scale`:
 // MVSNet's naive feature-map scaling (feature pixel (i, j) sits on image pixel (i/scale, j/scale)),
 // which the published weights were trained with.  -> [4,4] float32

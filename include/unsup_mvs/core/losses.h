@@ -20,6 +20,8 @@
 
 #include <string>
 
+#include "unsup_mvs/core/geometry.h"
+
 namespace umvs {
 
 enum class PhotometricTerm {
@@ -79,6 +81,14 @@ torch::Tensor ssim_loss(const torch::Tensor& ref, const torch::Tensor& warped, c
 // Edge-aware smoothness of depth [B,H,W] given the reference image [B,C,H,W]  -> scalar.
 // Depth is divided by its per-image mean first, so the weight does not depend on scene units.
 torch::Tensor smoothness_loss(const torch::Tensor& depth, const torch::Tensor& image);
+
+// Supervised depth loss (MVSNet's smooth L1) on the pixels with ground truth (gt > 0): the
+// estimate and the truth are compared in plane indices (geometry.h: depth_to_plane_index), so
+// one unit is one depth interval and scenes of any scale weigh alike; smooth L1 is quadratic
+// below one interval. Mean over the pixels with ground truth, 0 when there is none.
+//   depth, gt [B,H,W]; depth_values [B,D] the network's hypotheses  -> scalar
+torch::Tensor supervised_depth_loss(const torch::Tensor& depth, const torch::Tensor& gt,
+                                    const torch::Tensor& depth_values, DepthSampling sampling);
 
 struct LossTerms {
   torch::Tensor total;        // scalar, differentiable
