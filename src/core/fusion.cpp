@@ -238,8 +238,22 @@ ConsistencyCheck check_consistency(const torch::Tensor& ref_depth, const torch::
 
 DepthFusion::DepthFusion(FusionConfig config, torch::Device device) : config_(config), device_(device) { config_.validate(); }
 
-PointCloud DepthFusion::fuse(const std::vector<FusionView>& views, const std::vector<std::vector<int>>& sources,
-                             std::vector<FusionViewStats>* stats) {
+namespace {
+
+// What the batch rule decides for one reference view.
+struct ReferenceResult {
+  const Prepared* ref;
+  int num_sources;
+  torch::Tensor keep;   // [H,W] bool: valid and confirmed by enough sources
+  torch::Tensor depth;  // [H,W] float32: mean of the view's and the agreeing depths
+  torch::Tensor count;  // [H,W] int32: agreeing sources
+};
+
+// The batch rule over all views: checks the inputs (throwing std::invalid_argument naming the
+// view), prepares the views on the device and calls per_view(i, result) for each reference.
+template <typename PerView>
+void for_each_reference(const std::vector<FusionView>& views, const std::vector<std::vector<int>>& sources,
+                        const FusionConfig& config, const torch::Device& device, PerView&& per_view) {
   torch::NoGradGuard no_grad;
   if (!sources.empty() && sources.size() != views.size()) {
     throw std::invalid_argument("fusion: " + std::to_string(sources.size()) + " source lists for " + std::to_string(views.size()) +
@@ -257,34 +271,54 @@ PointCloud DepthFusion::fuse(const std::vector<FusionView>& views, const std::ve
   }
   std::vector<Prepared> prepared;
   prepared.reserve(views.size());
-  for (const auto& v : views) prepared.push_back(prepare(v, config_, device_));
-  if (stats) stats->clear();
-
-  PointCloud cloud;
-  std::unordered_set<int64_t> voxels;
+  for (const auto& v : views) prepared.push_back(prepare(v, config, device));
   for (size_t i = 0; i < prepared.size(); ++i) {
-    const auto t0 = std::chrono::steady_clock::now();
     const auto& ref = prepared[i];
     std::vector<int> src = (sources.empty() || sources[i].empty()) ? rank_sources_by_score(prepared, i) : sources[i];
-    if (static_cast<int>(src.size()) > config_.max_source_views) src.resize(config_.max_source_views);
+    if (static_cast<int>(src.size()) > config.max_source_views) src.resize(config.max_source_views);
     auto count = torch::zeros_like(ref.depth, torch::kInt32);
     auto depth_sum = ref.depth.clone();
-    for (int j : src) accumulate(ref, prepared[j], config_, count, depth_sum);
-    auto keep = ref.valid & (count >= config_.min_agreeing_views);
-    PointCloud points = make_points(ref, keep, depth_sum / (count + 1).to(torch::kFloat32), count);
+    for (int j : src) accumulate(ref, prepared[j], config, count, depth_sum);
+    auto keep = ref.valid & (count >= config.min_agreeing_views);
+    per_view(i, ReferenceResult{&ref, static_cast<int>(src.size()), keep, depth_sum / (count + 1).to(torch::kFloat32),
+                                count});
+  }
+}
+
+}  // namespace
+
+PointCloud DepthFusion::fuse(const std::vector<FusionView>& views, const std::vector<std::vector<int>>& sources,
+                             std::vector<FusionViewStats>* stats) {
+  if (stats) stats->clear();
+  PointCloud cloud;
+  std::unordered_set<int64_t> voxels;
+  auto t0 = std::chrono::steady_clock::now();
+  for_each_reference(views, sources, config_, device_, [&](size_t, const ReferenceResult& r) {
+    PointCloud points = make_points(*r.ref, r.keep, r.depth, r.count);
     if (config_.voxel_size > 0) points = voxel_filter(points, config_.voxel_size, voxels);
     cloud.append(points);
     if (stats) {
       FusionViewStats s;
-      s.id = ref.id;
-      s.num_sources = static_cast<int>(src.size());
-      s.valid_pixels = ref.valid.sum().item<int64_t>();
+      s.id = r.ref->id;
+      s.num_sources = r.num_sources;
+      s.valid_pixels = r.ref->valid.sum().item<int64_t>();
       s.points = static_cast<int64_t>(points.size());
       s.seconds = seconds_since(t0);
       stats->push_back(s);
     }
-  }
+    t0 = std::chrono::steady_clock::now();
+  });
   return cloud;
+}
+
+std::vector<DepthFusion::Agreement> DepthFusion::agreement(const std::vector<FusionView>& views,
+                                                           const std::vector<std::vector<int>>& sources) {
+  std::vector<Agreement> out(views.size());
+  for_each_reference(views, sources, config_, device_, [&](size_t i, const ReferenceResult& r) {
+    out[i].confirmed = r.keep.cpu();
+    out[i].depth = torch::where(r.keep, r.depth, torch::zeros_like(r.depth)).cpu();
+  });
+  return out;
 }
 
 // ---------------------------------------------------------------------------------------------

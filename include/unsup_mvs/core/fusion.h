@@ -75,6 +75,17 @@ class DepthFusion {
   PointCloud fuse(const std::vector<FusionView>& views, const std::vector<std::vector<int>>& sources = {},
                   std::vector<FusionViewStats>* stats = nullptr);
 
+  // The same test without making points: per view, the pixels fuse() would keep (valid and
+  // confirmed by min_agreeing_views sources) and their fused depth (the mean of the view's and
+  // the agreeing depths). Self-training learns from these pixels; adaptation is judged by their
+  // share. Same arguments and errors as fuse(); results on the CPU, in the order of `views`.
+  struct Agreement {
+    torch::Tensor confirmed;  // [H,W] bool
+    torch::Tensor depth;      // [H,W] float32, 0 where not confirmed
+  };
+  std::vector<Agreement> agreement(const std::vector<FusionView>& views,
+                                   const std::vector<std::vector<int>>& sources = {});
+
   const FusionConfig& config() const { return config_; }
 
  private:
