@@ -44,6 +44,7 @@ void TrainingTuple::validate() const {
   if (depth_gt.defined() && (depth_gt.dim() != 2 || depth_gt.size(0) != ref.height || depth_gt.size(1) != ref.width)) {
     bad("ground-truth depth must be [H,W] like the reference image");
   }
+  if (supervised && !depth_gt.defined()) bad("supervised training needs ground-truth depth, and there is none");
 }
 
 torch::Tensor downsample_to_depth_grid(const torch::Tensor& image) {
@@ -54,6 +55,7 @@ TrainingBatch make_training_batch(const std::vector<TrainingTuple>& tuples, int 
                                   const torch::Device& device) {
   if (tuples.empty()) throw std::invalid_argument("make_training_batch: empty batch");
   std::vector<torch::Tensor> images, proj, depth_values, loss_ref, loss_src, K_ref, K_src, T, gt;
+  std::vector<bool> b_supervised;
   bool any_gt = false;
   for (const auto& t : tuples) {
     t.validate();
@@ -87,6 +89,7 @@ TrainingBatch make_training_batch(const std::vector<TrainingTuple>& tuples, int 
     K_src.push_back(torch::stack(ks));
     T.push_back(torch::stack(ts));
     const int H = ref_cam.height, W = ref_cam.width;
+    b_supervised.push_back(t.supervised);
     if (t.depth_gt.defined()) {
       any_gt = true;
       gt.push_back(t.depth_gt.to(torch::kFloat32).slice(0, 0, H * 4, 4).slice(1, 0, W * 4, 4).contiguous());
@@ -104,6 +107,7 @@ TrainingBatch make_training_batch(const std::vector<TrainingTuple>& tuples, int 
   b.K_src = torch::stack(K_src).to(device);
   b.T_src_ref = torch::stack(T).to(device);
   if (any_gt) b.depth_gt = torch::stack(gt).to(device);
+  b.supervised = std::move(b_supervised);
   return b;
 }
 
@@ -127,6 +131,9 @@ void TrainerConfig::validate() const {
   }
   if (!(lr > 0) || !std::isfinite(lr)) throw std::invalid_argument("learning rate must be positive");
   if (!(beta1 >= 0 && beta1 < 1) || !(beta2 >= 0 && beta2 < 1)) throw std::invalid_argument("Adam betas must be in [0,1)");
+  if (!(supervised_weight >= 0) || !std::isfinite(supervised_weight)) {
+    throw std::invalid_argument("supervised weight must be finite and >= 0");
+  }
 }
 
 void LossValues::add(const LossTerms& t) {
@@ -141,7 +148,7 @@ void LossValues::add(const LossTerms& t) {
 LossValues LossValues::mean() const {
   if (count == 0) return *this;
   LossValues m = *this;
-  for (double* v : {&m.total, &m.photometric, &m.ssim, &m.smoothness, &m.valid_fraction}) *v /= count;
+  for (double* v : {&m.total, &m.photometric, &m.ssim, &m.smoothness, &m.valid_fraction, &m.supervised}) *v /= count;
   m.count = 1;
   return m;
 }
@@ -164,9 +171,33 @@ LossValues Trainer::step(const std::vector<TrainingTuple>& tuples) {
   std::vector<torch::Tensor> buffers_before;
   for (const auto& buffer : model_->buffers()) buffers_before.push_back(buffer.clone());
   const auto out = model_->forward(b.images, b.proj, b.depth_values);
-  const auto terms = unsupervised_loss(b.loss_ref, b.loss_src, b.K_ref, b.K_src, b.T_src_ref, out.depth, config_.loss);
+  // Which tuples learn from ground truth and which from photometric consistency.
+  std::vector<int64_t> supervised_rows, photometric_rows;
+  for (size_t i = 0; i < b.supervised.size(); ++i) {
+    (b.supervised[i] ? supervised_rows : photometric_rows).push_back(static_cast<int64_t>(i));
+  }
+  const double batch_size = static_cast<double>(b.supervised.size());
+  auto rows = [&](const torch::Tensor& t, const std::vector<int64_t>& r) {
+    return r.size() == b.supervised.size() ? t : t.index_select(0, torch::tensor(r, torch::kLong).to(t.device()));
+  };
+  torch::Tensor total = torch::zeros({}, out.depth.options());
   LossValues values;
-  values.add(terms);
+  if (!photometric_rows.empty()) {
+    const auto& r = photometric_rows;
+    const auto terms = unsupervised_loss(rows(b.loss_ref, r), rows(b.loss_src, r), rows(b.K_ref, r), rows(b.K_src, r),
+                                         rows(b.T_src_ref, r), rows(out.depth, r), config_.loss);
+    values.add(terms);
+    total = total + terms.total * (r.size() / batch_size);
+  }
+  if (!supervised_rows.empty()) {
+    const auto& r = supervised_rows;
+    const auto supervised = supervised_depth_loss(rows(out.depth, r), rows(b.depth_gt, r), rows(b.depth_values, r),
+                                                  model_->config().depth_sampling);
+    values.supervised = supervised.item<double>();
+    total = total + supervised * (config_.supervised_weight * r.size() / batch_size);
+  }
+  values.total = total.item<double>();
+  values.count = 1;
   optimizer_->zero_grad();
   if (!std::isfinite(values.total)) {  // no update from a broken batch; the caller reports it
     torch::NoGradGuard no_grad;
@@ -174,7 +205,7 @@ LossValues Trainer::step(const std::vector<TrainingTuple>& tuples) {
     for (size_t i = 0; i < buffers.size(); ++i) buffers[i].copy_(buffers_before[i]);
     return values;
   }
-  terms.total.backward();
+  total.backward();
   optimizer_->step();
   return values;
 }
@@ -222,6 +253,90 @@ void Trainer::load_optimizer_state(const std::string& bytes) {
   std::istringstream is(bytes);
   archive.load_from(is, device_);
   optimizer_->load(archive);
+}
+
+namespace {
+
+// Fusion's verdict on a tuple's reference: the reference and each loss view are inferred in turn
+// as the reference (sources: the tuple's other views, reference first), and the reference's
+// depth map is checked against the loss views' maps.
+DepthFusion::Agreement reference_agreement(DepthEstimator& estimator, const TrainingTuple& t,
+                                           const FusionConfig& fusion) {
+  t.validate();
+  std::vector<ViewInput> views{t.network_views.front()};
+  views.insert(views.end(), t.loss_views.begin(), t.loss_views.end());
+  const size_t sources_per_view = t.network_views.size() - 1;
+  std::vector<FusionView> maps;
+  for (size_t i = 0; i < views.size(); ++i) {
+    std::vector<ViewInput> input{views[i]};
+    for (size_t j = 0; j < views.size() && input.size() <= sources_per_view; ++j) {
+      if (j != i) input.push_back(views[j]);
+    }
+    const DepthMap m = estimator.estimate(input, t.depth_min, t.depth_max);
+    maps.push_back(FusionView{static_cast<int64_t>(i), m.depth, m.confidence, {}, m.camera});
+  }
+  FusionConfig config = fusion;
+  config.min_agreeing_views = std::min<int>(config.min_agreeing_views, static_cast<int>(t.loss_views.size()));
+  config.max_source_views = static_cast<int>(t.loss_views.size());
+  std::vector<std::vector<int>> sources(maps.size(), std::vector<int>{0});  // only the reference is used
+  sources[0].clear();
+  for (size_t j = 1; j < maps.size(); ++j) sources[0].push_back(static_cast<int>(j));
+  return DepthFusion(config, estimator.device()).agreement(maps, sources)[0];
+}
+
+DepthEstimator eval_estimator(MvsNet& model, int num_depth, const torch::Device& device) {
+  DepthEstimatorConfig config;
+  config.num_depth = num_depth;
+  return DepthEstimator(model, device, config);  // eval mode, no gradients
+}
+
+}  // namespace
+
+ConsistencyScore depth_consistency(MvsNet& model, const std::vector<TrainingTuple>& tuples, int num_depth,
+                                   const FusionConfig& fusion, const torch::Device& device) {
+  const bool was_training = model->is_training();
+  DepthEstimator estimator = eval_estimator(model, num_depth, device);
+  ConsistencyScore score;
+  int64_t confirmed = 0;
+  for (const auto& t : tuples) {
+    const auto agreement = reference_agreement(estimator, t, fusion);
+    confirmed += agreement.confirmed.sum().item<int64_t>();
+    score.pixels += agreement.confirmed.numel();
+    ++score.tuples;
+  }
+  model->train(was_training);
+  if (score.pixels > 0) score.confirmed_fraction = static_cast<double>(confirmed) / static_cast<double>(score.pixels);
+  return score;
+}
+
+std::vector<TrainingTuple> pseudo_labelled_tuples(MvsNet& model, const std::vector<TrainingTuple>& tuples,
+                                                  int num_depth, const FusionConfig& fusion,
+                                                  const torch::Device& device, ConsistencyScore* labelled) {
+  const bool was_training = model->is_training();
+  DepthEstimator estimator = eval_estimator(model, num_depth, device);
+  std::vector<TrainingTuple> out;
+  ConsistencyScore score;
+  int64_t confirmed = 0;
+  for (const auto& t : tuples) {
+    const auto agreement = reference_agreement(estimator, t, fusion);
+    const int64_t n = agreement.confirmed.sum().item<int64_t>();
+    confirmed += n;
+    score.pixels += agreement.confirmed.numel();
+    ++score.tuples;
+    // Depth pixel (i, j) sits on input pixel (4i, 4j), where make_training_batch reads labels.
+    TrainingTuple p = t;
+    const auto& ref = t.network_views.front().camera;
+    p.depth_gt = torch::zeros({ref.height, ref.width}, torch::kFloat32);
+    const int64_t h = agreement.depth.size(0), w = agreement.depth.size(1);
+    p.depth_gt.slice(0, 0, 4 * h, 4).slice(1, 0, 4 * w, 4).copy_(agreement.depth);
+    p.supervised = true;
+    p.name = t.name + " (pseudo-labelled)";
+    out.push_back(std::move(p));
+  }
+  model->train(was_training);
+  if (score.pixels > 0) score.confirmed_fraction = static_cast<double>(confirmed) / static_cast<double>(score.pixels);
+  if (labelled) *labelled = score;
+  return out;
 }
 
 std::string torch_rng_state() {

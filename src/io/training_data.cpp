@@ -23,6 +23,11 @@ void TupleConfig::validate() const {
   }
   if (!(max_zoom >= 1.0) || !std::isfinite(max_zoom)) bad("max_zoom must be >= 1");
   if (!(jitter >= 0.0 && jitter < 1.0)) bad("jitter must be in [0, 1)");
+  if (supervised && !read_ground_truth) bad("supervised training reads ground truth: read_ground_truth must be on");
+  if (!(min_gain > 0.0) || !(max_gain >= min_gain) || !std::isfinite(max_gain)) {
+    bad("exposure gains must satisfy 0 < min_gain <= max_gain, got [" + std::to_string(min_gain) + ", " +
+        std::to_string(max_gain) + "]");
+  }
 }
 
 namespace {
@@ -71,8 +76,13 @@ MvsFolderSource::MvsFolderSource(const std::vector<std::string>& roots, TupleCon
         ++skipped_;
         continue;
       }
+      const bool ref_has_gt = config_.read_ground_truth && !folders_.back().depth_gt_path(p.ref).empty();
+      if (config_.supervised && !ref_has_gt) {
+        throw std::runtime_error(root + ": view " + std::to_string(p.ref) +
+                                 " has no depth_gt/ map, and supervised training needs one for every reference");
+      }
       entries_.push_back({folders_.size() - 1, p.ref, std::vector<int>(p.sources.begin(), p.sources.begin() + needed)});
-      if (!folders_.back().depth_gt_path(p.ref).empty()) has_gt_ = true;
+      if (ref_has_gt) has_gt_ = true;
       ++usable;
     }
     if (usable == 0) {
@@ -86,7 +96,8 @@ std::string MvsFolderSource::description() const {
   std::ostringstream s;
   s << entries_.size() << " tuples from " << folders_.size() << " folder(s)";
   if (skipped_ > 0) s << " (" << skipped_ << " views with too few neighbours skipped)";
-  s << (has_gt_ ? ", with ground-truth depth" : ", no ground truth");
+  s << (config_.supervised ? ", supervised on ground-truth depth"
+                           : has_gt_ ? ", with ground-truth depth (for scoring only)" : ", no ground truth");
   return s.str();
 }
 
@@ -118,12 +129,17 @@ TrainingTuple make_training_tuple(std::string name, const ViewInput& ref, const 
     gain = torch::tensor({uniform(*rng, 1 - j, 1 + j), uniform(*rng, 1 - j, 1 + j), uniform(*rng, 1 - j, 1 + j)},
                          torch::kFloat32).view({3, 1, 1});
   }
+  double exposure = 1.0;
+  if (rng && (config.min_gain != 1.0 || config.max_gain != 1.0)) {
+    exposure = std::exp(uniform(*rng, std::log(config.min_gain), std::log(config.max_gain)));
+  }
   auto make_view = [&](const ViewInput& v) {
     if (v.camera.width != W0 || v.camera.height != H0) {
       throw std::runtime_error(name + ": a source image's size differs from the reference's");
     }
     auto img = apply_network_resize(rgb8_to_float(v.image), plan);
     if (gain.defined()) img = (((img - 0.5) * contrast + 0.5 + brightness) * gain).clamp(0, 1);
+    if (exposure != 1.0) img = (img * exposure).clamp(0, 1);
     return ViewInput{float_to_rgb8(img), apply_network_resize(v.camera, plan)};
   };
 
@@ -142,6 +158,7 @@ TrainingTuple make_training_tuple(std::string name, const ViewInput& ref, const 
     }
     t.depth_gt = apply_network_resize_nearest(depth_gt, plan);
   }
+  t.supervised = config.supervised;
   t.validate();
   return t;
 }
@@ -157,7 +174,7 @@ TrainingTuple MvsFolderSource::tuple(size_t index, std::mt19937_64* rng) const {
     sources.push_back({v.image, v.cam.camera});
   }
   torch::Tensor gt;
-  const std::string gt_path = folder.depth_gt_path(e.ref);
+  const std::string gt_path = config_.read_ground_truth ? folder.depth_gt_path(e.ref) : std::string();
   if (!gt_path.empty()) gt = read_pfm(gt_path);
   return make_training_tuple(folder.root() + " view " + std::to_string(e.ref), {ref.image, ref.cam.camera}, sources,
                              ref.cam.depth_min, ref.cam.resolved_depth_max(config_.num_depth), gt, config_, rng);
@@ -182,6 +199,63 @@ std::string TupleSampler::state() const {
   s << rng_ << "\n" << position_ << " " << order_.size();
   for (size_t i : order_) s << " " << i;
   return s.str();
+}
+
+TupleList::TupleList(std::vector<TrainingTuple> tuples, std::string what)
+    : tuples_(std::move(tuples)), what_(std::move(what)) {}
+
+TrainingTuple TupleList::tuple(size_t index, std::mt19937_64*) const {
+  if (index >= tuples_.size()) throw std::out_of_range("tuple index " + std::to_string(index) + " out of range");
+  return tuples_[index];
+}
+
+std::string TupleList::description() const { return std::to_string(tuples_.size()) + " " + what_; }
+
+void TupleList::replace(std::vector<TrainingTuple> tuples) {
+  if (tuples.size() != tuples_.size()) {
+    throw std::invalid_argument("TupleList::replace: " + std::to_string(tuples.size()) + " tuples for " +
+                                std::to_string(tuples_.size()));
+  }
+  tuples_ = std::move(tuples);
+}
+
+MixedSampler::MixedSampler(const TupleSource& first, const TupleSource* second, double first_share, uint64_t seed)
+    : first_(first, seed), first_share_(first_share), choice_rng_(seed ^ 0x9e3779b97f4a7c15ULL) {
+  if (second != nullptr) {
+    if (!(first_share >= 0.0 && first_share <= 1.0)) {
+      throw std::invalid_argument("the share of tuples from the first source must be in [0, 1], got " +
+                                  std::to_string(first_share));
+    }
+    second_ = std::make_unique<TupleSampler>(*second, seed + 1);
+  }
+}
+
+TrainingTuple MixedSampler::next(bool augment) {
+  if (!second_) return first_.next(augment);
+  return uniform(choice_rng_, 0.0, 1.0) < first_share_ ? first_.next(augment) : second_->next(augment);
+}
+
+// Sections separated by a line "--": the choice RNG, the first sampler, the second (if any). The
+// single-source state is the first sampler's alone, as before mixing existed.
+std::string MixedSampler::state() const {
+  if (!second_) return first_.state();
+  std::ostringstream s;
+  s << choice_rng_ << "\n--\n" << first_.state() << "\n--\n" << second_->state();
+  return s.str();
+}
+
+void MixedSampler::set_state(const std::string& state) {
+  if (!second_) return first_.set_state(state);
+  const auto a = state.find("\n--\n");
+  const auto b = a == std::string::npos ? a : state.find("\n--\n", a + 4);
+  if (b == std::string::npos) throw std::runtime_error("mixed training sampler state is malformed or from another run");
+  std::istringstream choice(state.substr(0, a));
+  std::mt19937_64 rng;
+  choice >> rng;
+  if (!choice) throw std::runtime_error("mixed training sampler state is malformed");
+  first_.set_state(state.substr(a + 4, b - a - 4));
+  second_->set_state(state.substr(b + 4));
+  choice_rng_ = rng;
 }
 
 void TupleSampler::set_state(const std::string& state) {

@@ -25,7 +25,7 @@ namespace {
 
 const char* kCsvHeader =
     "step,total,photometric,ssim,smoothness,valid_fraction,lr,seconds,val_photometric,val_total,val_abs_err,"
-    "val_within_1pct";
+    "val_within_1pct,supervised";
 
 struct LogRow {
   int64_t step = 0;
@@ -47,6 +47,7 @@ std::string csv_line(const LogRow& r) {
   } else {
     s << ",,,";
   }
+  s << "," << r.loss.supervised;
   return s.str();
 }
 
@@ -69,8 +70,8 @@ std::string describe(const umvs::Evaluation& ev) {
 }
 
 // The rng_state of a checkpoint: the sampler's text state, a NUL, then LibTorch's generator bytes.
-std::string pack_rng(const umvs::TupleSampler& sampler) { return sampler.state() + '\0' + umvs::torch_rng_state(); }
-void unpack_rng(const std::string& bytes, umvs::TupleSampler& sampler) {
+std::string pack_rng(const umvs::MixedSampler& sampler) { return sampler.state() + '\0' + umvs::torch_rng_state(); }
+void unpack_rng(const std::string& bytes, umvs::MixedSampler& sampler) {
   const auto nul = bytes.find('\0');
   if (nul == std::string::npos) throw std::runtime_error("checkpoint has no training RNG state: cannot resume exactly");
   sampler.set_state(bytes.substr(0, nul));
@@ -131,14 +132,17 @@ std::vector<umvs::TrainingTuple> fixed_tuples(const umvs::TupleSource& source, i
   return out;
 }
 
-// The data: a training source and, when there is one, the held-out source validated on.
+// The data: a training source and, when there is one, the held-out source validated on, and
+// rendered folders trained on their ground truth in the same run.
 struct Data {
-  std::unique_ptr<umvs::TupleSource> train, held_out;
+  std::unique_ptr<umvs::TupleSource> train, held_out, supervised;
 };
 
 Data open_folders(const umvs::Args& args, const umvs::TupleConfig& config) {
   Data d;
-  d.train = std::make_unique<umvs::MvsFolderSource>(args.all("data"), config);
+  umvs::TupleConfig train_config = config;
+  train_config.supervised = args.str("loss") == "supervised";
+  d.train = std::make_unique<umvs::MvsFolderSource>(args.all("data"), train_config);
   if (args.given("val")) d.held_out = std::make_unique<umvs::MvsFolderSource>(args.all("val"), config);
   return d;
 }
@@ -211,7 +215,21 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
       .option("init", "", "start from this checkpoint (ours or MVSNet_pytorch weights); default random")
       .flag("resume", "continue exactly from OUT/last.pt")
       .option("eval-only", "", "evaluate this checkpoint on --data and exit")
-      .option("loss", "robust", "naive | first-order | robust (first-order + top-K)")
+      .option("loss", "robust",
+              "naive | first-order | robust (first-order + top-K) | supervised (smooth L1 on --data's depth_gt/)")
+      .option("supervised-data", "",
+              "rendered folder(s) with depth_gt/, trained on their ground truth in the same run as --data/--bag")
+      .option("supervised-share", "0.5", "share of tuples drawn from --supervised-data")
+      .option("supervised-weight", "0.1", "weight of the supervised term against the photometric total")
+      .option("self-training-every", "0",
+              "self-training: every N steps (and at the start) the training tuples are labelled by the current model "
+              "where several views agree (fusion thresholds) and train on those labels at --supervised-share, the "
+              "others photometrically; no ground truth is read (0 = off)")
+      .option("pseudo-label-tuples", "0", "self-training: label at most this many training tuples (0 = all)")
+      .option("min-gain", "1", "exposure augmentation: lowest gain applied to a whole tuple (log-uniform draw)")
+      .option("max-gain", "1", "exposure augmentation: highest gain (clipped at white)")
+      .option("input-normalization", "per_image_channel",
+              "new models: none | per_image_channel (each image and channel to zero mean, unit variance)")
       .option("preset", "paper", "loss weights: paper (0.8/0.2/0.0067) | authors (12/6/0.18, Huber, normalised)")
       .option("views-in", "3", "views the network sees (reference + neighbours)")
       .option("views-loss", "6", "neighbours warped by the loss (M)")
@@ -245,8 +263,13 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
   const std::string loss = args.str("loss");
   if (loss == "naive") tcfg.loss.term = umvs::PhotometricTerm::kNaive, tcfg.loss.top_k = 0;
   else if (loss == "first-order") tcfg.loss.term = umvs::PhotometricTerm::kFirstOrder, tcfg.loss.top_k = 0;
-  else if (loss == "robust") tcfg.loss.term = umvs::PhotometricTerm::kFirstOrder, tcfg.loss.top_k = args.integer("top-k");
-  else throw std::invalid_argument("--loss must be naive, first-order or robust, got '" + loss + "'");
+  else if (loss == "robust" || loss == "supervised") {
+    // supervised: the photometric loss still scores validation tuples.
+    tcfg.loss.term = umvs::PhotometricTerm::kFirstOrder, tcfg.loss.top_k = args.integer("top-k");
+  } else {
+    throw std::invalid_argument("--loss must be naive, first-order, robust or supervised, got '" + loss + "'");
+  }
+  tcfg.supervised_weight = args.real("supervised-weight");
   tcfg.num_depth = args.integer("num-depth");
   tcfg.lr = args.real("lr");
   tcfg.beta1 = args.real("beta1");
@@ -259,6 +282,18 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
   data_cfg.height = args.integer("height");
   data_cfg.num_depth = tcfg.num_depth;
   data_cfg.jitter = args.real("jitter");
+  data_cfg.min_gain = args.real("min-gain");
+  data_cfg.max_gain = args.real("max-gain");
+  const int self_training_every = args.integer("self-training-every");
+  const bool self_training = self_training_every > 0;
+  if (self_training_every < 0) throw std::invalid_argument("--self-training-every must be >= 0");
+  if (self_training) {
+    if (loss == "supervised" || args.given("supervised-data") || args.given("depth-topic")) {
+      throw std::invalid_argument("--self-training-every learns from the model's own consistent depth: it takes no "
+                                  "ground truth (--loss supervised, --supervised-data, --depth-topic)");
+    }
+    data_cfg.read_ground_truth = false;  // label-free, also where the folders have depth_gt/
+  }
   const bool augment = args.integer("augment") != 0;
   if (!augment) data_cfg.max_zoom = 1.0;
   if (tcfg.loss.top_k > data_cfg.views_loss) {
@@ -271,7 +306,18 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
     throw std::invalid_argument("--val folders cannot be mixed with --bag (held-out keyframes validate; see --holdout-every)");
   }
   const bool eval_only = args.given("eval-only");
+  if (from_bags && loss == "supervised") {
+    throw std::invalid_argument("--loss supervised needs --data folders with depth_gt/; bags train photometrically "
+                                "(add rendered folders with --supervised-data)");
+  }
   Data data = from_bags ? open_bags(args, data_cfg, eval_only) : open_folders(args, data_cfg);
+  if (args.given("supervised-data") && !eval_only) {
+    umvs::TupleConfig supervised_cfg = data_cfg;
+    supervised_cfg.supervised = true;
+    data.supervised = std::make_unique<umvs::MvsFolderSource>(args.all("supervised-data"), supervised_cfg);
+    std::cerr << "supervised data: " << data.supervised->description() << ", share "
+              << args.real("supervised-share") << ", weight " << tcfg.supervised_weight << "\n";
+  }
   // --eval-only scores held-out bag keyframes, or the --data folders themselves.
   std::cerr << "data: " << (eval_only && from_bags ? *data.held_out : *data.train).description()
             << "\nloss: " << tcfg.loss.to_string() << "\n";
@@ -279,13 +325,16 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
   if (eval_only) {
     const umvs::TupleSource& eval_source = from_bags ? *data.held_out : *data.train;
     auto loaded = umvs::load_model(args.str("eval-only"), device);
-    const auto ev =
-        umvs::evaluate_model(loaded.model, fixed_tuples(eval_source, args.integer("val-tuples")), tcfg, device);
-    std::cout << args.str("eval-only") << ": " << describe(ev) << "\n";
+    const auto tuples = fixed_tuples(eval_source, args.integer("val-tuples"));
+    const auto ev = umvs::evaluate_model(loaded.model, tuples, tcfg, device);
+    // Label-free judge besides the photometric loss: the share of depth that other views confirm.
+    const auto consistency = umvs::depth_consistency(loaded.model, tuples, tcfg.num_depth, umvs::FusionConfig(), device);
+    std::cout << args.str("eval-only") << ": " << describe(ev) << ", multi-view consistent "
+              << 100.0 * consistency.confirmed_fraction << "%\n";
     if (!args.str("out").empty()) {
       umvs::make_directories(args.str("out"));
       umvs::write_file_atomically(args.str("out") + "/eval.csv", [&](std::ostream& os) {
-        os << "checkpoint,tuples,photometric,ssim,smoothness,total,abs_err,abs_rel,within_1pct\n"
+        os << "checkpoint,tuples,photometric,ssim,smoothness,total,abs_err,abs_rel,within_1pct,consistent\n"
            << args.str("eval-only") << "," << ev.tuples << "," << ev.loss.photometric << "," << ev.loss.ssim << ","
            << ev.loss.smoothness << "," << ev.loss.total << ",";
         if (ev.depth.pixels > 0) {
@@ -293,7 +342,7 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
         } else {
           os << ",,";
         }
-        os << "\n";
+        os << "," << consistency.confirmed_fraction << "\n";
       });
     }
     return 0;
@@ -304,6 +353,15 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
   umvs::make_directories(out);
   const std::string last_path = out + "/last.pt", best_path = out + "/best.pt", log_path = out + "/train_log.csv";
   const umvs::TupleSource& source = *data.train;
+  // Self-training: the training tuples labelled by the model (refreshed every round), mixed with
+  // the photometric tuples like --supervised-data.
+  std::unique_ptr<umvs::TupleList> pseudo;
+  std::vector<umvs::TrainingTuple> to_label;
+  if (self_training) {
+    to_label = fixed_tuples(source, args.integer("pseudo-label-tuples"));
+    pseudo = std::make_unique<umvs::TupleList>(to_label, "pseudo-labelled training tuples");
+    data.supervised.reset();
+  }
   std::vector<umvs::TrainingTuple> val_tuples;
   if (data.held_out) {
     val_tuples = fixed_tuples(*data.held_out, args.integer("val-tuples"));
@@ -332,11 +390,16 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
     mcfg.num_depth = tcfg.num_depth;
     mcfg.num_views = data_cfg.views_in;
     mcfg.depth_sampling = umvs::depth_sampling_from_string(args.str("depth-sampling"));
+    mcfg.input_normalization = umvs::input_normalization_from_string(args.str("input-normalization"));
     model = umvs::MvsNet(mcfg);
   }
   model->set_num_depth(tcfg.num_depth);
   umvs::Trainer trainer(model, device, tcfg);
-  umvs::TupleSampler sampler(source, static_cast<uint64_t>(args.integer("seed")));
+  // Tuples come from --data/--bag, mixed with --supervised-data at --supervised-share.
+  const umvs::TupleSource* supervised_source = self_training ? pseudo.get() : data.supervised.get();
+  const bool mixed = supervised_source != nullptr;
+  umvs::MixedSampler sampler(mixed ? *supervised_source : source, mixed ? &source : nullptr,
+                             args.real("supervised-share"), static_cast<uint64_t>(args.integer("seed")));
   int64_t step = 0;
   std::vector<LogRow> history;
   std::vector<std::string> kept_lines;
@@ -402,7 +465,32 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
   umvs::Progress progress("train", total_steps - step, std::max<int64_t>(1, (total_steps - step) / 50));
   const int64_t first = step;
   int bad_steps = 0;
+  // A self-training round starts at every multiple of --self-training-every: its labels come from
+  // the model at that step (round_start.pt keeps it, so that a resumed run labels exactly alike).
+  const std::string round_path = out + "/round_start.pt";
+  auto label_round = [&](umvs::MvsNet& labeller) {
+    umvs::ConsistencyScore score;
+    pseudo->replace(umvs::pseudo_labelled_tuples(labeller, to_label, tcfg.num_depth, umvs::FusionConfig(), device,
+                                                 &score));
+    std::cerr << "\nself-training round at step " << step << ": " << 100.0 * score.confirmed_fraction
+              << "% of the reference pixels of " << score.tuples << " tuples confirmed by other views\n";
+  };
+  if (self_training && step % self_training_every != 0) {  // resumed within a round
+    if (!fs::exists(round_path)) throw std::runtime_error("--resume: " + round_path + " is missing");
+    auto round_model = umvs::load_model(round_path, device);
+    if (round_model.meta.step != step / self_training_every * self_training_every) {
+      throw std::runtime_error("--resume: " + round_path + " is from step " + std::to_string(round_model.meta.step) +
+                               ", not from the start of the round of step " + std::to_string(step));
+    }
+    label_round(round_model.model);
+  }
   while (step < total_steps) {
+    if (self_training && step % self_training_every == 0) {
+      label_round(trainer.model());
+      umvs::CheckpointMeta m;
+      m.step = step;
+      umvs::save_checkpoint(round_path, trainer.model(), m);
+    }
     const auto t0 = std::chrono::steady_clock::now();
     std::vector<umvs::TrainingTuple> tuples;
     for (int i = 0; i < batch; ++i) tuples.push_back(sampler.next(augment));
@@ -425,8 +513,8 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
     history.push_back(row);
     if (row.has_val || step == total_steps) write_curve(out + "/loss_curve.png", history);
     char extra[160];
-    std::snprintf(extra, sizeof(extra), "loss %.4f (photo %.4f ssim %.4f smooth %.4f)", row.loss.total,
-                  row.loss.photometric, row.loss.ssim, row.loss.smoothness);
+    std::snprintf(extra, sizeof(extra), "loss %.4f (photo %.4f ssim %.4f smooth %.4f sup %.3f)", row.loss.total,
+                  row.loss.photometric, row.loss.ssim, row.loss.smoothness, row.loss.supervised);
     progress.update(step - first, extra);
   }
   progress.finish();

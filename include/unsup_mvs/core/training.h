@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "unsup_mvs/core/depth_estimator.h"
+#include "unsup_mvs/core/fusion.h"
 #include "unsup_mvs/core/losses.h"
 #include "unsup_mvs/core/mvsnet.h"
 
@@ -29,6 +30,9 @@ struct TrainingTuple {
   std::vector<ViewInput> loss_views;     // M views warped into the reference by the loss
   double depth_min = 0.0, depth_max = 0.0;
   torch::Tensor depth_gt;                // optional float32 [H,W] on the input grid, 0 = unknown
+  // Trained on depth_gt with the supervised loss (rendered data) instead of the photometric
+  // loss; otherwise depth_gt, when present, only scores.
+  bool supervised = false;
   std::string name;                      // for messages, e.g. "scan1/view 12"
 
   // Throws std::invalid_argument naming the tuple and the problem.
@@ -46,6 +50,7 @@ struct TrainingBatch {
   torch::Tensor K_src;         // [B,M,3,3]
   torch::Tensor T_src_ref;     // [B,M,4,4]
   torch::Tensor depth_gt;      // [B,h,w] (0 = unknown) or undefined when no tuple has GT
+  std::vector<bool> supervised;  // [B]: the tuple is trained on depth_gt (TrainingTuple::supervised)
 };
 TrainingBatch make_training_batch(const std::vector<TrainingTuple>& tuples, int num_depth, DepthSampling sampling,
                                   const torch::Device& device);
@@ -69,12 +74,16 @@ struct TrainerConfig {
   double lr = 1e-3;         // Adam
   double beta1 = 0.95;
   double beta2 = 0.999;
+  // Weight of supervised_depth_loss (tuples marked supervised: rendered scenes) against the
+  // photometric total (the other tuples: real images, bags) when both train in one optimisation.
+  double supervised_weight = 1.0;
   void validate() const;
 };
 
 // Scalar results of one step or evaluation (averages over the batches).
 struct LossValues {
   double total = 0, photometric = 0, ssim = 0, smoothness = 0, valid_fraction = 0;
+  double supervised = 0;  // supervised_depth_loss of the tuples trained on ground truth
   int count = 0;
   void add(const LossTerms& t);
   LossValues mean() const;
@@ -114,6 +123,28 @@ class Trainer {
 // service compares between a new and the served model, and GT depth errors where available.
 Evaluation evaluate_model(MvsNet& model, const std::vector<TrainingTuple>& tuples, const TrainerConfig& config,
                           const torch::Device& device);
+
+// Multi-view consistency of a model's depth on tuples, without ground truth: the reference and
+// each loss view are inferred in turn as the reference (sources: the tuple's reference and its
+// best other views), and a reference pixel counts as confirmed when fusion's rule accepts it
+// against the loss views' depth maps (FusionConfig: confidence, reprojection and relative-depth
+// thresholds, agreeing views; min_agreeing_views is capped at the number of loss views).
+// A model whose depth got worse has fewer confirmed pixels, whatever its photometric loss.
+struct ConsistencyScore {
+  double confirmed_fraction = 0.0;  // confirmed reference pixels / all reference depth pixels
+  int64_t pixels = 0;               // reference depth pixels evaluated
+  int tuples = 0;
+};
+ConsistencyScore depth_consistency(MvsNet& model, const std::vector<TrainingTuple>& tuples, int num_depth,
+                                   const FusionConfig& fusion, const torch::Device& device);
+
+// Self-training labels: each tuple's reference depth where depth_consistency's rule confirms it
+// (several views agree within the fusion thresholds, confident), as depth_gt on the input grid
+// (0 elsewhere), marked supervised; one output per input tuple (one without a confirmed pixel
+// teaches nothing). The tuples' own depth_gt, if any, is never read. `labelled` (optional) receives the confirmed share.
+std::vector<TrainingTuple> pseudo_labelled_tuples(MvsNet& model, const std::vector<TrainingTuple>& tuples,
+                                                  int num_depth, const FusionConfig& fusion,
+                                                  const torch::Device& device, ConsistencyScore* labelled = nullptr);
 
 // LibTorch's default CPU generator state as bytes and back (exact resume).
 std::string torch_rng_state();

@@ -24,6 +24,16 @@ struct TupleConfig {
   // contrast and per-channel gain in [1 - jitter, 1 + jitter], brightness in [-jitter/2, jitter/2].
   double max_zoom = 1.25;
   double jitter = 0.1;
+  // Exposure augmentation (training only): after the jitter, all views of the tuple are
+  // multiplied by one gain drawn log-uniformly from [min_gain, max_gain] and clipped at 1, as a
+  // darker or saturating camera would record them. [1, 1] = off (no random draw).
+  double min_gain = 1.0, max_gain = 1.0;
+  // Tuples are trained on their ground truth (TrainingTuple::supervised): every reference must
+  // have one (rendered data).
+  bool supervised = false;
+  // false: depth_gt/ is never opened (label-free runs such as self-training stay label-free even
+  // where the folders have ground truth).
+  bool read_ground_truth = true;
   void validate() const;  // throws std::invalid_argument naming the field
 };
 
@@ -70,6 +80,26 @@ class MvsFolderSource : public TupleSource {
   bool has_gt_ = false;
 };
 
+// Tuples held in memory (e.g. pseudo-labelled ones), handed out as they are (no augmentation).
+// replace() swaps the contents for as many new tuples, so samplers drawing from it stay valid.
+class TupleList : public TupleSource {
+ public:
+  TupleList(std::vector<TrainingTuple> tuples, std::string what);
+  size_t size() const override { return tuples_.size(); }
+  TrainingTuple tuple(size_t index, std::mt19937_64* rng) const override;
+  std::string description() const override;
+  void replace(std::vector<TrainingTuple> tuples);  // throws std::invalid_argument on a size change
+
+ private:
+  std::vector<TrainingTuple> tuples_;
+  std::string what_;
+};
+
+// Draws each tuple from `first` with probability first_share, else from `second` (each cycling
+// through its own shuffled order): e.g. rendered scenes with ground truth mixed with real images
+// in one optimisation. Its state is saved and restored like TupleSampler's.
+class MixedSampler;
+
 // Nearest-neighbour resampling of a depth map [H0,W0] with a NetworkResize plan  -> [h,w]
 torch::Tensor apply_network_resize_nearest(const torch::Tensor& depth, const NetworkResize& plan);
 
@@ -87,6 +117,21 @@ class TupleSampler {
   std::mt19937_64 rng_;
   std::vector<size_t> order_;
   size_t position_ = 0;
+};
+
+class MixedSampler {
+ public:
+  // second may be null: then every tuple comes from first.
+  MixedSampler(const TupleSource& first, const TupleSource* second, double first_share, uint64_t seed);
+  TrainingTuple next(bool augment = true);
+  std::string state() const;
+  void set_state(const std::string& state);  // throws std::runtime_error when malformed
+
+ private:
+  TupleSampler first_;
+  std::unique_ptr<TupleSampler> second_;
+  double first_share_;
+  std::mt19937_64 choice_rng_;
 };
 
 }  // namespace umvs
