@@ -67,7 +67,7 @@ for target in synth livingroom; do
     if [ ! -f "$WORK/ft_${model}_$target/last.pt" ]; then
       echo "[results] fine-tuning $model on $target ($(( $(date +%s) - start )) s so far)"
       # shellcheck disable=SC2046
-      "$UMVS" train $(tune_args "$target") --init "$ckpt" --save-every 100000 --threads "$THREADS" \
+      "$UMVS" train $(tune_args "$target") --init "$ckpt" --save-every 100000 --threads "$THREADS" --overwrite \
         --out "$WORK/ft_${model}_$target" >/dev/null 2>&1
     fi
     evaluate "${model}_ft" "$WORK/ft_${model}_$target/last.pt" "$target"
