@@ -69,7 +69,8 @@ TEST(BagFaults, ALogWithoutTfSaysNoTransformWasFoundForTheCameraFrame) {
 TEST(BagFaults, ShellMetacharactersInBagPathsAreJustCharacters) {
   const std::string data = test::scene("meta_data");
   const std::string dir = test::temp_dir("meta");
-  const std::string bag = dir + "/a;touch " + dir + "/pwned;$(id).bag";
+  // (A shell running this name would create "pwned" in the working directory.)
+  const std::string bag = dir + "/a;touch pwned;$(id)`id`.bag";
   auto quote = [](const std::string& s) { return "'" + s + "'"; };
   Result written = run_umvs("bag --data " + data + " --out " + quote(bag));
   ASSERT_EQ(written.status, 0) << written.output;
@@ -77,6 +78,7 @@ TEST(BagFaults, ShellMetacharactersInBagPathsAreJustCharacters) {
   Result inspect = run_umvs("bag --inspect " + quote(bag));
   EXPECT_EQ(inspect.status, 0) << inspect.output;
   EXPECT_TRUE(contains(inspect.output, "5 posed and calibrated")) << inspect.output;
+  EXPECT_FALSE(fs::exists("pwned"));
   EXPECT_FALSE(fs::exists(dir + "/pwned"));
 }
 
