@@ -47,7 +47,7 @@ evaluate() {  # name -> held-out metrics of WORK/name/last.pt in WORK/name/eval/
 }
 
 start=$(date +%s)
-"$UMVS" train "${common[@]}" --steps 0 --out "$WORK/untrained" >/dev/null 2>&1
+"$UMVS" train "${common[@]}" --steps 0 --overwrite --out "$WORK/untrained" >/dev/null 2>&1
 evaluate untrained
 for spec in "naive --loss naive" "first_order --loss first-order" "robust_k1 --loss robust --top-k 1" \
             "robust_k3 --loss robust --top-k 3"; do
@@ -55,7 +55,7 @@ for spec in "naive --loss naive" "first_order --loss first-order" "robust_k1 --l
   if [ ! -f "$WORK/$name/last.pt" ] || ! grep -q "^$STEPS," "$WORK/$name/train_log.csv" 2>/dev/null; then
     echo "training $name ($flags, $STEPS steps)" >&2
     # shellcheck disable=SC2086
-    "$UMVS" train "${common[@]}" $flags --out "$WORK/$name" >/dev/null 2>"$WORK/$name.log"
+    "$UMVS" train "${common[@]}" $flags --overwrite --out "$WORK/$name" >/dev/null 2>"$WORK/$name.log"
   fi
   evaluate "$name"
 done

@@ -1,95 +1,184 @@
 #!/usr/bin/env bash
-# docs/results.md, "Default model" tables: depth accuracy of the default model (models/) and of the
-# published MVSNet_pytorch weights (supervised on DTU; ../shared/data/mvsnet_parity) on held-out
-# synthetic scenes and on the living-room frames (exact depth), each before and after unsupervised
-# fine-tuning on the target images themselves (Khot et al. 2019, Table 5: no ground truth is used
-# for fine-tuning; it is only used to score).
+# docs/results.md, "Default model" table: depth accuracy of models on targets none of them was
+# trained on, before and after label-free adaptation to the target images themselves (Khot et al.
+# 2019, Table 5 style: ground truth only scores).
+#   models:  new = models/unsup_mvsnet.pt; old = the previous default model (git OLD_REV);
+#            mvsnet = the published MVSNet_pytorch weights (supervised on DTU; ../shared/data)
+#   targets: rendered = held-out `umvs synth` scenes, one per recipe (seeds used nowhere else);
+#            livingroom = ../shared/data/livingroom (5 frames with exact depth);
+#            templeRing = ../shared/data/templeRing (no ground truth: fused points and the share
+#            inside the bounding box, 640x480, D = 128, `umvs fuse` defaults)
+#   adaptation: "photometric" = STEPS of `umvs train` (robust loss) on the target images;
+#               "self-training" = the same with --self-training-every (labels: the model's own
+#               multi-view consistent depth; no ground truth read).
+# Each cell: mean abs err (m) / abs rel / within 1 % (%); templeRing: points / % inside the box.
 #
-# Usage: scripts/results.sh [WORK_DIR]   (environment: UMVS, STEPS_SYNTH, STEPS_LIVINGROOM, THREADS,
-#        MODELS="default mvsnet": the models to evaluate and fine-tune; fine-tunings already in WORK_DIR are reused)
-# Prints the markdown tables and writes them to WORK_DIR/results.md.
+# Usage: scripts/results.sh [WORK_DIR]
+#   environment: UMVS, THREADS (2), STEPS (fine-tuning steps, 150), MODELS ("new old mvsnet"),
+#                ADAPT ("none photometric self"), ADAPT_MODELS ("new mvsnet") and ADAPT_TARGETS
+#                ("livingroom templeRing"): which models are adapted on which targets (others: "-"),
+#                OLD_REV (default model before issue 13: 6fd5413)
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
-UMVS="${UMVS:-$here/../build/devel/lib/unsup_mvs/umvs}"
+repo="$here/.."
+UMVS="${UMVS:-$repo/build/devel/lib/unsup_mvs/umvs}"
 WORK="${1:-/tmp/umvs_results}"
-SHARED="${UMVS_SHARED_DATA:-$here/../../shared/data}"
-STEPS_SYNTH="${STEPS_SYNTH:-300}"
-STEPS_LIVINGROOM="${STEPS_LIVINGROOM:-300}"
+SHARED="${UMVS_SHARED_DATA:-$repo/../shared/data}"
 THREADS="${THREADS:-2}"
-MODELS="${MODELS:-default mvsnet}"
-DEFAULT_MODEL="$here/../models/unsup_mvsnet.pt"
-MVSNET="$SHARED/mvsnet_parity/mvsnet_pytorch_d192.pt"
+STEPS="${STEPS:-150}"
+MODELS="${MODELS:-new old mvsnet}"
+ADAPT="${ADAPT:-none photometric self}"
+OLD_REV="${OLD_REV:-6fd5413}"
+ADAPT_MODELS="${ADAPT_MODELS:-new mvsnet}"
+ADAPT_TARGETS="${ADAPT_TARGETS:-livingroom templeRing}"
 [ -x "$UMVS" ] || { echo "umvs not found at $UMVS (set UMVS=/path/to/umvs)" >&2; exit 1; }
-[ -f "$MVSNET" ] && [ -d "$SHARED/livingroom" ] || { echo "needs $SHARED/mvsnet_parity and livingroom" >&2; exit 1; }
-mkdir -p "$WORK/data"
-
-# Targets: held-out synthetic scenes (seeds used nowhere else) and the living room.
-synth_dirs=()
-for spec in "room_301 room 301" "facade_302 facade 302" "dtu_303 dtu_like 303"; do
-  read -r name scene seed <<<"$spec"
-  [ -f "$WORK/data/$name/pair.txt" ] || "$UMVS" synth --out "$WORK/data/$name" --scene "$scene" --seed "$seed" \
-    --views 10 --width 320 --height 256 --gt-samples 0 --threads "$THREADS" >/dev/null
-  synth_dirs+=("$WORK/data/$name")
+for d in mvsnet_parity livingroom templeRing; do
+  [ -d "$SHARED/$d" ] || { echo "needs $SHARED/$d" >&2; exit 1; }
 done
-synth=$(IFS=,; echo "${synth_dirs[*]}")
-[ -f "$WORK/data/livingroom/pair.txt" ] || "$UMVS" import rgbd --data "$SHARED/livingroom" --out "$WORK/data/livingroom" >/dev/null
+mkdir -p "$WORK/data" "$WORK/models"
 
-# Per target: evaluation size and loss views (the living room has 5 frames: 3 loss views), and the
-# fine-tuning size (synthetic: the default model's training size).
+checkpoint() {  # model -> path
+  case "$1" in
+    new) echo "$repo/models/unsup_mvsnet.pt" ;;
+    old) [ -f "$WORK/models/old.pt" ] || git -C "$repo" show "$OLD_REV:models/unsup_mvsnet.pt" >"$WORK/models/old.pt"
+         echo "$WORK/models/old.pt" ;;
+    mvsnet) echo "$SHARED/mvsnet_parity/mvsnet_pytorch_d192.pt" ;;
+  esac
+}
+
+# Targets.
+rendered_dirs=()
+for spec in "room 301" "facade 302" "dtu_like 303"; do
+  read -r scene seed <<<"$spec"
+  dir="$WORK/data/${scene}_$seed"
+  [ -f "$dir/pair.txt" ] || "$UMVS" synth --out "$dir" --scene "$scene" --seed "$seed" --views 10 --width 320 \
+    --height 256 --gt-samples 0 --threads "$THREADS" >/dev/null
+  rendered_dirs+=("$dir")
+done
+rendered=$(IFS=,; echo "${rendered_dirs[*]}")
+[ -f "$WORK/data/livingroom/pair.txt" ] ||
+  "$UMVS" import rgbd --data "$SHARED/livingroom" --out "$WORK/data/livingroom" >/dev/null
+[ -f "$WORK/data/templeRing/pair.txt" ] ||
+  "$UMVS" import middlebury --data "$SHARED/templeRing" --out "$WORK/data/templeRing" >/dev/null
+TEMPLE_BBOX=-0.023121,-0.038009,-0.091940,0.078626,0.121636,-0.017395
+
+# Per target: evaluation set-up, and fine-tuning set-up (the default model's training size).
 eval_args() {
   case "$1" in
-    synth) echo "--data $synth --width 320 --height 256 --num-depth 64 --views-loss 4 --top-k 3" ;;
+    rendered) echo "--data $rendered --width 320 --height 256 --num-depth 64 --views-loss 4 --top-k 3" ;;
     livingroom) echo "--data $WORK/data/livingroom --width 640 --height 480 --num-depth 128 --views-loss 3 --top-k 2" ;;
   esac
 }
 tune_args() {
   case "$1" in
-    synth) echo "--data $synth --width 160 --height 128 --num-depth 32 --views-loss 4 --top-k 3 --steps $STEPS_SYNTH" ;;
-    livingroom) echo "--data $WORK/data/livingroom --width 320 --height 256 --num-depth 64 --views-loss 3 --top-k 2 --steps $STEPS_LIVINGROOM" ;;
+    rendered) echo "--data $rendered --width 160 --height 128 --num-depth 32 --views-loss 4 --top-k 3" ;;
+    livingroom) echo "--data $WORK/data/livingroom --width 160 --height 128 --num-depth 32 --views-loss 3 --top-k 2" ;;
+    templeRing) echo "--data $WORK/data/templeRing --width 160 --height 128 --num-depth 32 --views-loss 6 --top-k 3" ;;
   esac
 }
-# name checkpoint target -> WORK/eval/name_target/eval.csv
-evaluate() {
-  # shellcheck disable=SC2046
-  "$UMVS" train $(eval_args "$3") --threads "$THREADS" --eval-only "$2" --out "$WORK/eval/$1_$3" >/dev/null 2>&1
+adapt_args() {
+  case "$1" in
+    photometric) echo "" ;;
+    self) echo "--self-training-every 25" ;;
+  esac
 }
-row() {  # label csv -> "| label | abs err | abs rel | within 1% | photometric |"
-  awk -F, -v label="$1" 'NR == 2 { printf "| %s | %.4f | %.3f | %.1f | %.4f |\n", label, $7, $8, 100 * $9, $3 }' "$2"
+
+# model adaptation target -> the checkpoint to score (fine-tuned when adaptation != none)
+adapted() {
+  local model=$1 adapt=$2 target=$3
+  local ckpt
+  ckpt=$(checkpoint "$model")
+  if [ "$adapt" = none ]; then echo "$ckpt"; return; fi
+  local out="$WORK/ft/${model}_${adapt}_$target"
+  if [ ! -f "$out/last.pt" ]; then
+    echo "[results] $adapt adaptation of $model on $target ($STEPS steps)" >&2
+    rm -rf "$out"
+    # shellcheck disable=SC2046
+    "$UMVS" train $(tune_args "$target") $(adapt_args "$adapt") --init "$ckpt" --steps "$STEPS" \
+      --save-every "$STEPS" --threads "$THREADS" --out "$out" >"$out.log" 2>&1 ||
+      { echo "[results] failed, see $out.log" >&2; return 1; }
+  fi
+  echo "$out/last.pt"
+}
+
+# model adaptation target -> one table cell
+cell() {
+  local model=$1 adapt=$2 target=$3 ckpt name="$1_$2_$3"
+  if [ "$adapt" != none ] && { [[ " $ADAPT_MODELS " != *" $model "* ]] || [[ " $ADAPT_TARGETS " != *" $target "* ]]; }; then
+    echo "-"
+    return
+  fi
+  ckpt=$(adapted "$model" "$adapt" "$target")
+  if [ "$target" = templeRing ]; then
+    local out="$WORK/eval/$name"
+    if [ ! -f "$out.fuse.txt" ]; then
+      rm -rf "$out"
+      "$UMVS" infer --data "$WORK/data/templeRing" --checkpoint "$ckpt" --out "$out" --num-depth 128 \
+        --threads "$THREADS" >/dev/null 2>&1
+      "$UMVS" fuse --depth "$out" --out "$out.ply" --threads "$THREADS" --bbox "$TEMPLE_BBOX" >"$out.fuse.txt" 2>&1
+    fi
+    awk '/^fused/ { n = $6 } /inside the bounding box/ { gsub(/[(%)]/, "", $NF); s = $NF }
+         END { printf "%d / %.1f", n, s }' "$out.fuse.txt"
+  else
+    local out="$WORK/eval/$name"
+    # shellcheck disable=SC2046
+    [ -f "$out/eval.csv" ] || "$UMVS" train $(eval_args "$target") --threads "$THREADS" --eval-only "$ckpt" \
+      --out "$out" >/dev/null 2>&1
+    awk -F, 'NR == 1 { for (i = 1; i <= NF; ++i) col[$i] = i }
+             NR == 2 { printf "%.3f / %.3f / %.1f", $col["abs_err"], $col["abs_rel"], 100 * $col["within_1pct"] }' \
+      "$out/eval.csv"
+  fi
+}
+
+# model adaptation target -> one row of the reload-rule table (from the two eval.csv files)
+judge() {
+  local before="$WORK/eval/$1_none_$3/eval.csv" after="$WORK/eval/$1_$2_$3/eval.csv"
+  [ -f "$before" ] && [ -f "$after" ] || return 0
+  awk -F, -v what="$(label "$1"), $2" -v target="$3" '
+    FNR == 1 { for (i = 1; i <= NF; ++i) col[$i] = i; next }
+    NR == FNR { r0 = $col["abs_rel"]; p0 = $col["photometric"]; c0 = $col["consistent"]; next }
+    { r1 = $col["abs_rel"]; p1 = $col["photometric"]; c1 = $col["consistent"] }
+    END {
+      accept = (p1 < p0 && c1 > c0); better = (r1 < r0)
+      printf "| %s | %s | %.3f -> %.3f | %.4f -> %.4f | %.1f%% -> %.1f%% | %s | %s |\n", what, target, r0, r1, p0, p1,
+             100 * c0, 100 * c1, accept ? "reload" : "keep", (accept == better) ? "yes" : "no"
+    }' "$before" "$after"
+}
+
+label() {
+  case "$1" in
+    new) echo "new default (rendered supervised + real photometric)" ;;
+    old) echo "old default (photometric only)" ;;
+    mvsnet) echo "MVSNet_pytorch weights (DTU-supervised)" ;;
+  esac
 }
 
 start=$(date +%s)
-for target in synth livingroom; do
-  for model in $MODELS; do
-    ckpt=$DEFAULT_MODEL
-    [ "$model" = mvsnet ] && ckpt=$MVSNET
-    evaluate "$model" "$ckpt" "$target"
-    if [ ! -f "$WORK/ft_${model}_$target/last.pt" ]; then
-      echo "[results] fine-tuning $model on $target ($(( $(date +%s) - start )) s so far)"
-      # shellcheck disable=SC2046
-      "$UMVS" train $(tune_args "$target") --init "$ckpt" --save-every 100000 --threads "$THREADS" \
-        --out "$WORK/ft_${model}_$target" >/dev/null 2>&1
-    fi
-    evaluate "${model}_ft" "$WORK/ft_${model}_$target/last.pt" "$target"
-  done
-done
-
 {
-  for target in synth livingroom; do
-    if [ "$target" = synth ]; then
-      echo "Held-out synthetic scenes (room 301, facade 302, dtu_like 303; 30 reference views, 320x256, D = 64):"
-    else
-      echo "Living room (../shared/data/livingroom, 4 reference views with 2+ neighbours, 640x480, D = 128):"
-    fi
-    echo
-    echo "| model | mean abs err (m) | abs rel | within 1% (%) | photometric |"
-    echo "|---|---|---|---|---|"
-    [ -f "$WORK/eval/default_ft_$target/eval.csv" ] || continue
-    row "default model (ours, unsupervised, synthetic + templeRing)" "$WORK/eval/default_$target/eval.csv"
-    row "default model, fine-tuned on these images (unsupervised)" "$WORK/eval/default_ft_$target/eval.csv"
-    row "MVSNet_pytorch weights (supervised, DTU)" "$WORK/eval/mvsnet_$target/eval.csv"
-    row "MVSNet_pytorch weights, fine-tuned on these images (unsupervised)" "$WORK/eval/mvsnet_ft_$target/eval.csv"
-    echo
+  echo "| model | adaptation | rendered (room, street, table-top) | living room | templeRing points / % in box |"
+  echo "|---|---|---|---|---|"
+  for model in $MODELS; do
+    for adapt in $ADAPT; do
+      echo "| $(label "$model") | $adapt | $(cell "$model" "$adapt" rendered) | $(cell "$model" "$adapt" livingroom) |" \
+           "$(cell "$model" "$adapt" templeRing) |"
+    done
   done
-  echo "Fine-tuning: $STEPS_SYNTH steps (synthetic, 160x128, D = 32) / $STEPS_LIVINGROOM steps (living room, 320x256, D = 64), robust loss, paper weights; $(( $(date +%s) - start )) s in all on $THREADS CPU threads."
+  echo
+  echo "The label-free reload rule (trainer node): accept an adapted model only when its held-out photometric"
+  echo "loss is lower AND its multi-view consistency higher than the model it replaces; checked against the"
+  echo "ground truth it never sees (abs rel before -> after):"
+  echo
+  echo "| adaptation | target | abs rel before -> after | photometric before -> after | consistent before -> after | rule | right? |"
+  echo "|---|---|---|---|---|---|---|"
+  for model in $MODELS; do
+    for adapt in $ADAPT; do
+      [ "$adapt" = none ] && continue
+      for target in rendered livingroom; do
+        judge "$model" "$adapt" "$target"
+      done
+    done
+  done
+  echo
+  echo "Adaptation: $STEPS steps on the target images (robust loss, paper weights; self-training relabels every 25 steps); $(( $(date +%s) - start )) s in all on $THREADS CPU threads."
 } | tee "$WORK/results.md"

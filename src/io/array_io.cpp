@@ -8,6 +8,7 @@
 #include <stdexcept>
 
 #include "unsup_mvs/io/atomic_file.h"
+#include "unsup_mvs/io/input_limits.h"
 
 namespace umvs {
 
@@ -29,7 +30,7 @@ const DtypeInfo kDtypes[] = {{"<f4", torch::kFloat32, 4}, {"<f8", torch::kFloat6
 }  // namespace
 
 torch::Tensor read_npy(const std::string& path) {
-  const std::string bytes = read_file_bytes(path);
+  const std::string bytes = read_bounded_file(path, kMaxArrayFileBytes, ".npy file");
   if (bytes.size() < 10 || bytes.compare(0, 6, "\x93NUMPY") != 0) fail(path, "not a .npy file (bad magic)");
   const int major = static_cast<unsigned char>(bytes[6]);
   size_t header_len = 0, offset = 0;
@@ -55,18 +56,24 @@ torch::Tensor read_npy(const std::string& path) {
   std::vector<int64_t> shape;
   const std::string dims = m[1];
   std::regex num("\\d+");
+  // Each dimension, and their product, must fit in the data that follows the header (checked
+  // one dimension at a time, so that the product cannot overflow).
+  const size_t data_offset = offset + header_len;
+  uint64_t count = 1;
   for (auto it = std::sregex_iterator(dims.begin(), dims.end(), num); it != std::sregex_iterator(); ++it) {
-    shape.push_back(std::stoll(it->str()));
+    if (it->str().size() > 18) fail(path, "dimension " + it->str() + " in the header is too large");
+    const uint64_t dim = std::stoull(it->str());
+    // dim * count <= bytes left, as dim <= bytes left / count.
+    if (count > 0) check_claimed_count(dim, count, bytes.size() - data_offset, "'" + path + "': array dimension");
+    count *= dim;
+    shape.push_back(static_cast<int64_t>(dim));
   }
   const DtypeInfo* info = nullptr;
   for (const auto& d : kDtypes) {
     if (descr == d.descr || (d.size == 1 && descr == "<u1")) info = &d;
   }
   if (!info) fail(path, "unsupported dtype '" + descr + "' (float32/64, uint8, int32/64 little-endian)");
-  int64_t count = 1;
-  for (auto s : shape) count *= s;
-  const size_t data_offset = offset + header_len;
-  if (bytes.size() - data_offset < count * info->size) fail(path, "truncated data");
+  check_claimed_count(count, info->size, bytes.size() - data_offset, "'" + path + "': array elements");
   auto out = torch::empty(shape, info->type);
   std::memcpy(out.data_ptr(), bytes.data() + data_offset, count * info->size);
   return out;
@@ -98,7 +105,7 @@ void write_npy(const std::string& path, const torch::Tensor& tensor) {
 }
 
 torch::Tensor read_pfm(const std::string& path) {
-  const std::string bytes = read_file_bytes(path);
+  const std::string bytes = read_bounded_file(path, kMaxArrayFileBytes, "PFM file");
   std::istringstream in(bytes);
   std::string magic;
   int width = 0, height = 0;
@@ -110,7 +117,8 @@ torch::Tensor read_pfm(const std::string& path) {
   const int channels = magic == "PF" ? 3 : 1;
   const size_t offset = static_cast<size_t>(in.tellg());
   const size_t count = static_cast<size_t>(width) * height * channels;
-  if (bytes.size() < offset + count * 4) fail(path, "truncated PFM data");
+  if (!in || offset > bytes.size()) fail(path, "truncated PFM header");
+  check_claimed_count(count, 4, bytes.size() - offset, "'" + path + "': PFM values");
   auto img = torch::empty({height, width, channels}, torch::kFloat32);
   std::memcpy(img.data_ptr(), bytes.data() + offset, count * 4);
   if (scale > 0) {  // big-endian data

@@ -7,6 +7,7 @@
 #include <tf2_msgs/TFMessage.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <iterator>
@@ -98,8 +99,11 @@ BagReadStats for_each_posed_image(const std::string& path, const BagTopics& topi
     rosbag::Bag bag(path, rosbag::bagmode::Read);
     // Pass 1: every transform, so that a pose can be interpolated at any image stamp.
     rosbag::View tf_view(bag, rosbag::TopicQuery(std::vector<std::string>{"/tf", "/tf_static"}));
-    const double span = std::max(1.0, (tf_view.getEndTime() - tf_view.getBeginTime()).toSec() + 1.0);
-    tf2::BufferCore tf_buffer{ros::Duration(span)};
+    // The buffer keeps the whole log. (An empty view's begin is after its end: no subtraction of
+    // ros::Time then, it throws "Duration is out of dual 32-bit range".)
+    const bool has_tf = tf_view.size() > 0;
+    const double span = has_tf ? std::max(1.0, tf_view.getEndTime().toSec() - tf_view.getBeginTime().toSec() + 1.0) : 1.0;
+    tf2::BufferCore tf_buffer{ros::Duration(std::min(span, 2147483647.0))};
     for (const rosbag::MessageInstance& m : tf_view) {
       auto msg = m.instantiate<tf2_msgs::TFMessage>();
       if (!msg) continue;
@@ -146,6 +150,12 @@ BagReadStats for_each_posed_image(const std::string& path, const BagTopics& topi
       PosedImage out;
       out.stamp = img->header.stamp.toSec();
       Eigen::Matrix4d T_world_cam;
+      if (!has_tf) {
+        ++stats.without_pose;
+        note("no transform found from '" + topics.world_frame + "' to the camera frame '" + frame +
+             "': the bag has no messages on /tf or /tf_static");
+        continue;
+      }
       try {
         const auto tf = tf_buffer.lookupTransform(topics.world_frame, frame, img->header.stamp);
         geometry_msgs::Pose pose;
@@ -156,7 +166,8 @@ BagReadStats for_each_posed_image(const std::string& path, const BagTopics& topi
         T_world_cam = pose_to_matrix(pose);
       } catch (const tf2::TransformException& e) {
         ++stats.without_pose;
-        note(std::string("no pose: ") + e.what());
+        note("no transform found from '" + topics.world_frame + "' to the camera frame '" + frame + "' at " +
+             std::to_string(out.stamp) + ": " + e.what());
         continue;
       } catch (const std::invalid_argument& e) {
         ++stats.invalid;

@@ -9,6 +9,7 @@
 #include <stdexcept>
 
 #include "unsup_mvs/io/atomic_file.h"
+#include "unsup_mvs/io/input_limits.h"
 
 namespace umvs {
 
@@ -53,6 +54,20 @@ MvsNetConfig config_from_dict(const c10::impl::GenericDict& d, const std::string
     throw std::runtime_error("checkpoint '" + path + "': malformed network config");
   }
   return c;
+}
+
+// A model whose weights hold NaN or infinity produces NaN depth maps: refuse it by name.
+void check_finite_weights(torch::nn::Module& module, const std::string& path) {
+  for (const auto& named : {module.named_parameters(), module.named_buffers()}) {
+    for (const auto& t : named) {
+      if (!t.value().is_floating_point()) continue;
+      const int64_t bad = t.value().numel() - torch::isfinite(t.value()).sum().item<int64_t>();
+      if (bad > 0) {
+        throw std::runtime_error("'" + path + "' is a broken model: tensor '" + t.key() + "' has " + std::to_string(bad) +
+                                 " non-finite values (NaN or infinity)");
+      }
+    }
+  }
 }
 
 }  // namespace
@@ -116,7 +131,8 @@ void save_checkpoint(const std::string& path, MvsNet& model, const CheckpointMet
 }
 
 LoadedModel load_model(const std::string& path, const torch::Device& device, const MvsNetConfig* expected) {
-  const std::string raw = read_file_bytes(path);
+  const std::string raw = read_bounded_file(path, kMaxCheckpointBytes, "model file");
+  if (raw.compare(0, 2, "PK") == 0) verify_zip_archive(raw, path);
   c10::IValue value;
   try {
     value = torch::pickle_load(std::vector<char>(raw.begin(), raw.end()));
@@ -152,6 +168,7 @@ LoadedModel load_model(const std::string& path, const torch::Device& device, con
   }
   out.model = MvsNet(config);
   load_state_dict(*out.model, weights, path);
+  check_finite_weights(*out.model, path);
   out.model->to(device);
   out.model->eval();
   return out;

@@ -5,6 +5,7 @@
 #include <stdexcept>
 
 #include "unsup_mvs/io/atomic_file.h"
+#include "unsup_mvs/io/input_limits.h"
 
 #if defined(UMVS_HAVE_OPENCV)
 #include <opencv2/imgcodecs.hpp>
@@ -25,11 +26,25 @@ namespace fail_msg {
 }
 }  // namespace fail_msg
 
+#if defined(UMVS_HAVE_OPENCV) || defined(UMVS_HAVE_STB)
+namespace {
+// Before decoding: a regular file of bounded size whose header (PNG, JPEG) promises a bounded
+// image, so that a small file claiming 100000x100000 pixels is refused instead of decoded.
+void check_image_file(const std::string& path) {
+  checked_file_size(path, kMaxImageFileBytes, "image");
+  int width = 0, height = 0;
+  if (probe_image_size(path, &width, &height)) check_image_pixels(width, height, "image '" + path + "'");
+}
+}  // namespace
+#endif
+
 #if defined(UMVS_HAVE_OPENCV)
 
 torch::Tensor read_image_rgb8(const std::string& path) {
+  check_image_file(path);
   cv::Mat img = cv::imread(path, cv::IMREAD_UNCHANGED);
   if (img.empty()) throw std::runtime_error("cannot read image '" + path + "' (missing or not an image)");
+  check_image_pixels(img.cols, img.rows, "image '" + path + "'");
   if (img.depth() == CV_16U) img.convertTo(img, CV_8U, 1.0 / 257.0);
   if (img.depth() != CV_8U) throw std::runtime_error("image '" + path + "' has an unsupported pixel type");
   cv::Mat rgb;
@@ -43,8 +58,10 @@ torch::Tensor read_image_rgb8(const std::string& path) {
 }
 
 torch::Tensor read_image_u16(const std::string& path) {
+  check_image_file(path);
   cv::Mat img = cv::imread(path, cv::IMREAD_ANYDEPTH);
   if (img.empty()) throw std::runtime_error("cannot read image '" + path + "' (missing or not an image)");
+  check_image_pixels(img.cols, img.rows, "image '" + path + "'");
   if (img.channels() != 1) throw std::runtime_error("image '" + path + "' is not single-channel");
   img.convertTo(img, CV_32S);
   return torch::from_blob(img.data, {img.rows, img.cols}, torch::kInt32).clone();
@@ -84,6 +101,7 @@ void write_png_u16(const std::string& path, const torch::Tensor& values) {
 #elif defined(UMVS_HAVE_STB)
 
 torch::Tensor read_image_rgb8(const std::string& path) {
+  check_image_file(path);
   int w, h, c;
   unsigned char* data = stbi_load(path.c_str(), &w, &h, &c, 3);
   if (!data) throw std::runtime_error("cannot read image '" + path + "': " + stbi_failure_reason());
@@ -93,6 +111,7 @@ torch::Tensor read_image_rgb8(const std::string& path) {
 }
 
 torch::Tensor read_image_u16(const std::string& path) {
+  check_image_file(path);
   int w, h, c;
   unsigned short* data = stbi_load_16(path.c_str(), &w, &h, &c, 1);
   if (!data) throw std::runtime_error("cannot read image '" + path + "': " + stbi_failure_reason());

@@ -15,6 +15,7 @@
 #include "unsup_mvs/io/array_io.h"
 #include "unsup_mvs/io/atomic_file.h"
 #include "unsup_mvs/io/image_io.h"
+#include "unsup_mvs/io/input_limits.h"
 #include "unsup_mvs/io/mvs_folder.h"
 
 namespace umvs {
@@ -122,6 +123,7 @@ ImportSummary import_middlebury(const MiddleburyImportConfig& config) {
   }
   if (!(bmax.array() > bmin.array()).all()) throw std::runtime_error("empty bounding box");
 
+  checked_file_size(par, kMaxTextFileBytes, "calibration file");  // a FIFO would block the read
   std::ifstream in(par);
   if (!in) throw std::runtime_error("cannot open " + par);
   int count = 0;
@@ -209,6 +211,7 @@ ImportSummary import_rgbd(const RgbdImportConfig& config) {
     if (!fs::is_directory(fs::path(config.data_dir) / sub)) throw std::runtime_error(config.data_dir + " has no " + sub + "/ folder");
   }
   const std::string pose_path = config.data_dir + "/pose.txt";
+  checked_file_size(pose_path, kMaxTextFileBytes, "pose file");
   std::ifstream pose_in(pose_path);
   if (!pose_in) throw std::runtime_error("cannot open " + pose_path);
   std::vector<Eigen::Matrix4d> poses;  // camera-to-world, line k = frame k+1

@@ -10,6 +10,7 @@
 
 #include "unsup_mvs/io/atomic_file.h"
 #include "unsup_mvs/io/image_io.h"
+#include "unsup_mvs/io/input_limits.h"
 
 namespace umvs {
 
@@ -28,11 +29,13 @@ double MvsCam::resolved_depth_max(int default_num) const {
 }
 
 MvsCam read_cam_file(const std::string& path) {
+  checked_file_size(path, kMaxTextFileBytes, "camera file");
   std::ifstream in(path);
   if (!in) throw std::runtime_error("cannot open camera file '" + path + "'");
   auto fail = [&](const std::string& what) -> void { throw std::runtime_error("camera file '" + path + "': " + what); };
+  // The format has 31 tokens at most; anything after them is ignored (and never held in memory).
   std::vector<std::string> tokens;
-  for (std::string tok; in >> tok;) tokens.push_back(tok);
+  for (std::string tok; tokens.size() < 31 && in >> tok;) tokens.push_back(tok);
   size_t pos = 0;
   auto expect = [&](const std::string& word) {
     if (pos >= tokens.size() || tokens[pos] != word) fail("expected '" + word + "'");
@@ -57,7 +60,11 @@ MvsCam read_cam_file(const std::string& path) {
   if (pos < tokens.size()) {
     cam.depth_min = number("the depth line");
     cam.depth_interval = pos < tokens.size() ? number("the depth line") : 0.0;
-    if (pos < tokens.size()) cam.depth_num = static_cast<int>(number("the depth line"));
+    if (pos < tokens.size()) {
+      const double num = number("the depth line");
+      if (num < 0 || num > 1e6 || num != std::floor(num)) fail("DEPTH_NUM must be a whole number in [0, 1000000]");
+      cam.depth_num = static_cast<int>(num);
+    }
     if (pos < tokens.size()) cam.depth_max = number("the depth line");
     if (cam.depth_min <= 0.0) fail("DEPTH_MIN must be positive, got " + std::to_string(cam.depth_min));
     if (cam.depth_interval < 0.0) fail("DEPTH_INTERVAL must not be negative");
@@ -92,15 +99,21 @@ void write_cam_file(const std::string& path, const MvsCam& cam) {
 }
 
 std::vector<ViewPair> read_pair_file(const std::string& path) {
+  const uint64_t size = checked_file_size(path, kMaxTextFileBytes, "pair file");
   std::ifstream in(path);
   if (!in) throw std::runtime_error("cannot open pair file '" + path + "'");
   auto fail = [&](const std::string& what) { throw std::runtime_error("pair file '" + path + "': " + what); };
+  // Counts are bounded by the file size before anything is allocated: a view entry takes at least
+  // 4 bytes ("r\n0\n"), a source at least 4 ("i s ").
   int count = 0;
   if (!(in >> count) || count < 0) fail("first line must be the number of views");
+  check_claimed_count(static_cast<uint64_t>(count), 4, size, "pair file '" + path + "': number of views");
   std::vector<ViewPair> pairs(count);
   for (auto& p : pairs) {
     int n = 0;
     if (!(in >> p.ref >> n) || n < 0) fail("truncated or malformed entry");
+    check_claimed_count(static_cast<uint64_t>(n), 4, size,
+                        "pair file '" + path + "': number of sources of view " + std::to_string(p.ref));
     for (int i = 0; i < n; ++i) {
       int id;
       double score;

@@ -1,10 +1,12 @@
 #include "unsup_mvs/io/ply.h"
 
+#include <cstdlib>
 #include <cstring>
 #include <sstream>
 #include <stdexcept>
 
 #include "unsup_mvs/io/atomic_file.h"
+#include "unsup_mvs/io/input_limits.h"
 
 namespace umvs {
 
@@ -55,7 +57,7 @@ struct Property {
 }  // namespace
 
 PointCloud read_ply(const std::string& path) {
-  const std::string bytes = read_file_bytes(path);
+  const std::string bytes = read_bounded_file(path, kMaxPlyBytes, "PLY file");
   auto fail = [&](const std::string& what) { throw std::runtime_error("'" + path + "': " + what); };
   const size_t end = bytes.find("end_header");
   if (bytes.compare(0, 3, "ply") != 0 || end == std::string::npos) fail("not a PLY file");
@@ -71,9 +73,12 @@ PointCloud read_ply(const std::string& path) {
     if (key == "format") {
       ls >> format;
     } else if (key == "element") {
-      std::string name;
-      size_t count;
-      ls >> name >> count;
+      std::string name, count_text;
+      ls >> name >> count_text;
+      if (count_text.empty() || count_text.find_first_not_of("0123456789") != std::string::npos || count_text.size() > 18) {
+        fail("malformed element line '" + line + "'");
+      }
+      const size_t count = std::stoull(count_text);
       if (vertex_seen && !in_vertex) continue;
       in_vertex = name == "vertex";
       if (in_vertex) { vertex_count = count; vertex_seen = true; }
@@ -95,31 +100,43 @@ PointCloud read_ply(const std::string& path) {
   const int ir = index_of("red"), ig = index_of("green"), ib = index_of("blue");
   const int ic = index_of("confidence"), iv = index_of("views");
   if (ix < 0 || iy < 0 || iz < 0) fail("vertices have no x/y/z");
+  const size_t header_end = bytes.find('\n', end);
+  if (header_end == std::string::npos) fail("no vertex data after end_header");
+  const size_t pos = header_end + 1;
+  size_t stride = 0;
+  for (const auto& p : props) stride += p.size();
+  // The claimed count must fit in the file before anything is allocated for it: a binary vertex
+  // takes `stride` bytes, an ASCII one at least a digit and a separator per property.
+  check_claimed_count(vertex_count, format == "ascii" ? 2 * props.size() : stride, bytes.size() - pos,
+                      "'" + path + "': vertex count");
   PointCloud cloud;
   cloud.points.resize(vertex_count);
   const bool rgb = ir >= 0 && ig >= 0 && ib >= 0;
   if (rgb) cloud.colors.resize(vertex_count);
   if (ic >= 0) cloud.confidence.resize(vertex_count);
   if (iv >= 0) cloud.num_views.resize(vertex_count);
-  size_t pos = bytes.find('\n', end) + 1;
   std::vector<double> values(props.size());
   auto store = [&](size_t i) {
     cloud.points[i] = Eigen::Vector3f(values[ix], values[iy], values[iz]);
+    if (!cloud.points[i].allFinite()) fail("vertex " + std::to_string(i) + " has a non-finite coordinate (NaN or infinity)");
     if (rgb) cloud.colors[i] = {static_cast<uint8_t>(values[ir]), static_cast<uint8_t>(values[ig]), static_cast<uint8_t>(values[ib])};
     if (ic >= 0) cloud.confidence[i] = static_cast<float>(values[ic]);
     if (iv >= 0) cloud.num_views[i] = static_cast<uint8_t>(values[iv]);
   };
   if (format == "ascii") {
-    std::istringstream body(bytes.substr(pos));
+    // strtod, unlike operator>>, reads "nan" and "inf", so that they are reported as such.
+    const char* cursor = bytes.c_str() + pos;
     for (size_t i = 0; i < vertex_count; ++i) {
-      for (auto& v : values) body >> v;
-      if (!body) fail("truncated vertex data");
+      for (auto& v : values) {
+        char* next = nullptr;
+        v = std::strtod(cursor, &next);
+        if (next == cursor) fail("truncated or malformed vertex data at vertex " + std::to_string(i));
+        cursor = next;
+      }
       store(i);
     }
   } else if (format == "binary_little_endian") {
-    size_t stride = 0;
-    for (const auto& p : props) stride += p.size();
-    if (bytes.size() < pos + stride * vertex_count) fail("truncated vertex data");
+    if (bytes.size() - pos < stride * vertex_count) fail("truncated vertex data");
     for (size_t i = 0; i < vertex_count; ++i) {
       const char* rec = bytes.data() + pos + i * stride;
       size_t off = 0;

@@ -215,6 +215,7 @@ int eval_cloud(int argc, char** argv) {
   cfg.downsample_spacing = args.real("downsample");
   const auto est = umvs::read_ply(args.str("est"));
   const auto gt = umvs::read_ply(args.str("gt"));
+  if (est.empty()) throw std::runtime_error("estimated cloud " + args.str("est") + " has no points: nothing to evaluate");
   if (gt.empty()) throw std::runtime_error("ground-truth cloud " + args.str("gt") + " has no points");
   const umvs::CloudMetrics m = umvs::evaluate_cloud(est, gt, cfg);
   if (args.on("json")) {

@@ -1,6 +1,7 @@
 // umvs infer: depth and confidence maps for the views of an MVSNet-format folder.
 #include <torch/torch.h>
 
+#include <cmath>
 #include <filesystem>
 #include <iostream>
 #include <map>
@@ -8,6 +9,7 @@
 #include "unsup_mvs/core/depth_estimator.h"
 #include "unsup_mvs/core/device.h"
 #include "unsup_mvs/core/image_ops.h"
+#include "unsup_mvs/core/memory_bounds.h"
 #include "unsup_mvs/io/array_io.h"
 #include "unsup_mvs/io/atomic_file.h"
 #include "unsup_mvs/io/checkpoint.h"
@@ -18,6 +20,20 @@
 #include "unsup_mvs/tools/progress.h"
 
 namespace fs = std::filesystem;
+
+namespace {
+
+// --depth-min/--depth-max: > 0 overrides the cam file, 0 keeps it; anything else is refused.
+double depth_override(const umvs::Args& args, const char* name) {
+  const double v = args.real(name);
+  if (!std::isfinite(v) || v < 0) {
+    throw std::invalid_argument(std::string("--") + name + " must be a depth > 0 (or 0: from the cam file), got " +
+                                args.str(name));
+  }
+  return v;
+}
+
+}  // namespace
 
 UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
   umvs::Args args("infer",
@@ -46,6 +62,11 @@ UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
   const auto device = umvs::parse_device(args.str("device"));
   const int views = args.integer("views");
   if (views < 2) throw std::invalid_argument("--views must be at least 2");
+  const double depth_min_option = depth_override(args, "depth-min"), depth_max_option = depth_override(args, "depth-max");
+  if (depth_min_option > 0 && depth_max_option > 0 && depth_max_option <= depth_min_option) {
+    throw std::invalid_argument("impossible depth range: --depth-max " + args.str("depth-max") + " <= --depth-min " +
+                                args.str("depth-min"));
+  }
   umvs::MvsFolder folder(args.str("data"));
 
   auto loaded = umvs::load_model(args.str("checkpoint"), device);
@@ -63,19 +84,25 @@ UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
   if (refs.empty()) {
     for (const auto& p : folder.pairs()) refs.push_back(p.ref);
   }
-  const std::string out = args.str("out");
-  for (const char* sub : {"depth_est", "confidence", "cams", "images"}) umvs::make_directories(out + "/" + sub);
-
   std::map<int, umvs::MvsView> cache;
   auto view = [&](int id) -> const umvs::MvsView& {
     auto it = cache.find(id);
     if (it == cache.end()) it = cache.emplace(id, folder.load_view(id)).first;
     return it->second;
   };
+  // The network input of the first reference must fit in memory before anything is written.
+  if (!refs.empty()) {
+    const auto& first = view(refs.front()).cam.camera;
+    const auto plan = umvs::plan_network_resize(first.width, first.height, cfg.max_width, cfg.max_height);
+    umvs::check_inference_memory(plan.width, plan.height, estimator.num_depth(), views);
+  }
+  const std::string out = args.str("out");
+  for (const char* sub : {"depth_est", "confidence", "cams", "images"}) umvs::make_directories(out + "/" + sub);
 
   std::vector<umvs::ViewPair> out_pairs;
   umvs::Progress progress("infer", static_cast<int64_t>(refs.size()));
   int done = 0, skipped = 0;
+  bool range_reported = false;  // which range is used, said once when options override the cam files
   double total_seconds = 0;
   for (int ref : refs) {
     const auto& pair = folder.pair_of(ref);
@@ -89,9 +116,24 @@ UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
     inputs.push_back({view(ref).image, view(ref).cam.camera});
     for (int i = 0; i < views - 1; ++i) inputs.push_back({view(pair.sources[i]).image, view(pair.sources[i]).cam.camera});
     const auto& cam = view(ref).cam;
-    const double dmin = args.real("depth-min") > 0 ? args.real("depth-min") : cam.depth_min;
-    const double dmax = args.real("depth-max") > 0 ? args.real("depth-max") : cam.resolved_depth_max(estimator.num_depth());
+    const double dmin = depth_min_option > 0 ? depth_min_option : cam.depth_min;
+    const double dmax = depth_max_option > 0 ? depth_max_option : cam.resolved_depth_max(estimator.num_depth());
+    const std::string near_from = depth_min_option > 0 ? "--depth-min" : "its cam file";
+    const std::string far_from = depth_max_option > 0 ? "--depth-max" : "its cam file";
     if (dmin <= 0) throw std::invalid_argument("view " + std::to_string(ref) + ": no depth range in its cam file; give --depth-min/--depth-max");
+    if (!(dmax > dmin)) {
+      throw std::invalid_argument("view " + std::to_string(ref) + ": impossible depth range " + std::to_string(dmin) +
+                                  " (from " + near_from + ") .. " + std::to_string(dmax) + " (from " + far_from + ")");
+    }
+    if (!range_reported && (depth_min_option > 0 || depth_max_option > 0)) {
+      range_reported = true;
+      std::cerr << "depth range of view " << ref << ": " << dmin << " (from " << near_from << ") .. " << dmax << " (from "
+                << far_from << ")";
+      if (cam.depth_min > 0) {
+        std::cerr << "; its cam file gives " << cam.depth_min << " .. " << cam.resolved_depth_max(estimator.num_depth());
+      }
+      std::cerr << "\n";
+    }
 
     const umvs::DepthMap map = estimator.estimate(inputs, dmin, dmax);
     total_seconds += map.seconds;

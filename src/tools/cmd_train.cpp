@@ -7,10 +7,12 @@
 #include <sstream>
 
 #include "unsup_mvs/core/device.h"
+#include "unsup_mvs/core/memory_bounds.h"
 #include "unsup_mvs/core/training.h"
 #include "unsup_mvs/io/atomic_file.h"
 #include "unsup_mvs/io/checkpoint.h"
 #include "unsup_mvs/io/image_io.h"
+#include "unsup_mvs/io/run_folder.h"
 #include "unsup_mvs/io/training_data.h"
 #ifdef UMVS_HAVE_ROS
 #include "unsup_mvs/io/bag_training_data.h"
@@ -181,6 +183,63 @@ Data open_bags(const umvs::Args& args, const umvs::TupleConfig& config, bool eva
 #endif
 }
 
+// Options that a --resume may change: they do not change what the run computes. All others
+// (data, sizes, loss, optimiser, seed, validation, ...) are the run's configuration.
+const std::vector<std::string> kMayChangeOnResume = {"steps", "out", "resume", "overwrite", "eval-only", "device",
+                                                     "threads"};
+
+// Every option as given or defaulted; file and folder paths made absolute, so that a resume from
+// another working directory compares equal.
+umvs::RunConfig run_config_of(const umvs::Args& args) {
+  umvs::RunConfig config;
+  for (const auto& name : args.names()) {
+    const bool is_path = name == "data" || name == "val" || name == "bag" || name == "init" || name == "supervised-data";
+    std::string joined;
+    for (const auto& part : args.all(name)) {
+      joined += (joined.empty() ? "" : ",") + (is_path ? fs::absolute(part).lexically_normal().string() : part);
+    }
+    config[name] = joined;
+  }
+  return config;
+}
+
+// The metric best.pt is chosen by, as a checkpoint's metrics show it: the held-out ground-truth
+// depth error, the held-out photometric loss, or (without validation data) the training loss.
+std::string score_metric(const umvs::CheckpointMeta& meta) {
+  if (meta.metrics.count("val_abs_err")) return "val_abs_err";
+  if (meta.metrics.count("val_total")) return "val_total";
+  return "train_total";
+}
+std::string score_metric(const LogRow& row) {
+  if (!row.has_val) return "train_total";
+  return row.val.depth.pixels > 0 ? "val_abs_err" : "val_total";
+}
+
+// The integer options and option combinations, before anything is read or written.
+void check_training_options(const umvs::Args& args) {
+  auto at_least = [&](const char* name, int lowest) {
+    if (args.integer(name) < lowest) {
+      throw std::invalid_argument(std::string("--") + name + " must be >= " + std::to_string(lowest) + ", got " +
+                                  std::to_string(args.integer(name)));
+    }
+  };
+  at_least("steps", 0);
+  at_least("batch", 1);
+  at_least("save-every", 1);
+  at_least("val-tuples", 0);
+  at_least("seed", 0);
+  if (args.integer("augment") != 0 && args.integer("augment") != 1) throw std::invalid_argument("--augment must be 0 or 1");
+  umvs::depth_sampling_from_string(args.str("depth-sampling"));
+  if (args.given("eval-only")) {
+    if (args.on("resume") || args.on("overwrite")) throw std::invalid_argument("--eval-only trains nothing: no --resume or --overwrite");
+    return;
+  }
+  if (args.str("out").empty()) throw std::invalid_argument("--out is required for training");
+  if (args.on("resume") && args.on("overwrite")) {
+    throw std::invalid_argument("--resume continues the run in --out, --overwrite replaces it: give one of them");
+  }
+}
+
 }  // namespace
 
 UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photometric loss") {
@@ -192,6 +251,9 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
       "  last.pt, best.pt     checkpoints (model, Adam state, step, RNG), written atomically\n"
       "  train_log.csv        step, loss terms, lr, seconds, validation metrics\n"
       "  loss_curve.png       training loss (raw, smoothed) and validation score (red), log scale\n"
+      "  run_config.txt       the options of the run; --resume refuses to change them (except --steps,\n"
+      "                       --device, --threads)\n"
+      "OUT must be new or empty, unless --resume continues the run in it or --overwrite replaces it.\n"
       "best.pt is only replaced by a model with a lower validation score: GT depth error when the\n"
       "--val folders have depth_gt/, else their photometric loss (without --val: the training loss\n"
       "since the previous checkpoint). With --eval-only CHECKPOINT nothing is trained: the held-out\n"
@@ -213,7 +275,8 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
       .option("holdout-every", "5", "--bag: hold out every k-th keyframe for validation (0 = none)")
       .option("out", "", "output folder (required unless --eval-only)")
       .option("init", "", "start from this checkpoint (ours or MVSNet_pytorch weights); default random")
-      .flag("resume", "continue exactly from OUT/last.pt")
+      .flag("resume", "continue exactly from OUT/last.pt (with the options of OUT/run_config.txt)")
+      .flag("overwrite", "replace the run in a non-empty OUT (its last.pt, best.pt, log, curve, run_config.txt)")
       .option("eval-only", "", "evaluate this checkpoint on --data and exit")
       .option("loss", "robust",
               "naive | first-order | robust (first-order + top-K) | supervised (smooth L1 on --data's depth_gt/)")
@@ -251,6 +314,8 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
       .option("device", "cpu", "cpu | cuda | cuda:N")
       .option("threads", "0", "CPU threads (0 = all cores)");
   if (!args.parse(argc, argv)) return 0;
+  // Every option is checked before anything is read or written: a refused call changes nothing.
+  check_training_options(args);
 
   umvs::configure_threads(args.integer("threads"));
   const auto device = umvs::parse_device(args.str("device"));
@@ -296,9 +361,14 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
   }
   const bool augment = args.integer("augment") != 0;
   if (!augment) data_cfg.max_zoom = 1.0;
+  data_cfg.validate();
   if (tcfg.loss.top_k > data_cfg.views_loss) {
     throw std::invalid_argument("--top-k " + std::to_string(tcfg.loss.top_k) + " exceeds --views-loss " +
                                 std::to_string(data_cfg.views_loss));
+  }
+  if (data_cfg.width > 0 && data_cfg.height > 0) {
+    umvs::check_training_memory(data_cfg.width, data_cfg.height, tcfg.num_depth, data_cfg.views_in,
+                                data_cfg.views_loss, args.integer("batch"));
   }
   const bool from_bags = args.given("bag");
   if (from_bags == args.given("data")) throw std::invalid_argument("give either --data folders or --bag files");
@@ -309,6 +379,16 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
   if (from_bags && loss == "supervised") {
     throw std::invalid_argument("--loss supervised needs --data folders with depth_gt/; bags train photometrically "
                                 "(add rendered folders with --supervised-data)");
+  }
+  const bool resume = args.on("resume");
+  const std::string out = args.str("out");
+  const umvs::RunConfig run_config = run_config_of(args);
+  if (!eval_only) {
+    std::string warnings;
+    umvs::check_run_folder(out, resume ? umvs::RunStart::kResume
+                                       : args.on("overwrite") ? umvs::RunStart::kOverwrite : umvs::RunStart::kFresh,
+                           run_config, kMayChangeOnResume, &warnings);
+    std::cerr << warnings;
   }
   Data data = from_bags ? open_bags(args, data_cfg, eval_only) : open_folders(args, data_cfg);
   if (args.given("supervised-data") && !eval_only) {
@@ -348,9 +428,6 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
     return 0;
   }
 
-  const std::string out = args.str("out");
-  if (out.empty()) throw std::invalid_argument("--out is required for training");
-  umvs::make_directories(out);
   const std::string last_path = out + "/last.pt", best_path = out + "/best.pt", log_path = out + "/train_log.csv";
   const umvs::TupleSource& source = *data.train;
   // Self-training: the training tuples labelled by the model (refreshed every round), mixed with
@@ -368,17 +445,31 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
     std::cerr << "validation: " << data.held_out->description() << ", using " << val_tuples.size() << "\n";
   }
 
+  if (data_cfg.width == 0 || data_cfg.height == 0) {  // the size comes from the images
+    const auto first = source.tuple(0, nullptr).network_views.at(0).image;
+    umvs::check_training_memory(static_cast<int>(first.size(-1)), static_cast<int>(first.size(-2)), tcfg.num_depth,
+                                data_cfg.views_in, data_cfg.views_loss, args.integer("batch"));
+  }
+
   // The model: resumed, initialised from a checkpoint, or random.
-  const bool resume = args.on("resume");
   umvs::MvsNet model{nullptr};
   umvs::CheckpointMeta meta;
   double best = INFINITY;
+  // best.pt candidates are only compared under one metric (a depth error is no loss value).
+  std::string best_metric;
   if (resume) {
-    if (!fs::exists(last_path)) throw std::runtime_error("--resume: " + last_path + " does not exist");
     auto loaded = umvs::load_model(last_path, device);
     model = loaded.model;
     meta = loaded.meta;
     if (meta.metrics.count("best_score")) best = meta.metrics.at("best_score");
+    best_metric = score_metric(meta);
+    LogRow planned;
+    planned.has_val = !val_tuples.empty();
+    for (const auto& t : val_tuples) planned.val.depth.pixels += t.depth_gt.defined() ? 1 : 0;
+    if (score_metric(planned) != best_metric) {
+      throw std::invalid_argument("--resume: best.pt of this run was chosen by " + best_metric + ", this call would score by " +
+                                  score_metric(planned) + "; give the validation data of the run");
+    }
     std::cerr << "resuming " << last_path << " at step " << meta.step << "\n";
   } else if (args.given("init")) {
     auto loaded = umvs::load_model(args.str("init"), device);
@@ -409,6 +500,10 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
     step = meta.step;
     history = read_log(log_path, step, &kept_lines);
   }
+  // Everything is checked: from here on OUT changes.
+  umvs::make_directories(out);
+  if (args.on("overwrite")) umvs::remove_run_files(out);
+  umvs::write_run_config(out + "/" + umvs::kRunConfigFile, run_config);
   // The log holds exactly the rows up to the starting step (rows after the resumed checkpoint are dropped).
   umvs::write_file_atomically(log_path, [&](std::ostream& os) {
     os << kCsvHeader << "\n";
@@ -417,9 +512,8 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
   std::ofstream log(log_path, std::ios::app);
 
   const int64_t total_steps = args.integer("steps");
-  const int save_every = std::max(1, args.integer("save-every"));
+  const int save_every = args.integer("save-every");
   const int batch = args.integer("batch");
-  if (total_steps < 0 || batch < 1) throw std::invalid_argument("--steps must be >= 0 and --batch >= 1");
   double interval_loss = 0;
   int interval_count = 0;
 
@@ -433,7 +527,14 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
     }
     interval_loss = 0;
     interval_count = 0;
-    const bool improved = std::isfinite(score) ? score < best : !fs::exists(best_path);
+    const std::string metric = score_metric(row);
+    if (best_metric.empty()) best_metric = metric;
+    const bool comparable = metric == best_metric;
+    if (!comparable) {
+      std::cerr << "\nstep " << row.step << ": scored by " << metric << ", best.pt by " << best_metric
+                << ": best.pt kept\n";
+    }
+    const bool improved = comparable && (std::isfinite(score) ? score < best : !fs::exists(best_path));
     if (improved && std::isfinite(score)) best = score;
     umvs::CheckpointMeta m;
     m.step = row.step;

@@ -33,7 +33,9 @@ struct LoadedModel {
 // `expected` (optional) is the architecture the caller needs; a checkpoint of another
 // architecture is refused with a message naming the mismatch. For MVSNet_pytorch weights, which
 // carry no config, `expected` (or the defaults) gives the config.
-// Throws std::runtime_error naming the file for a missing, corrupt or unfitting file.
+// Throws std::runtime_error naming the file for a missing or unfitting file, one that is not a
+// regular file or larger than kMaxCheckpointBytes (io/input_limits.h), a damaged one (zip CRC
+// mismatch, unreadable pickle) and a model with NaN or infinite weights.
 LoadedModel load_model(const std::string& path, const torch::Device& device,
                        const MvsNetConfig* expected = nullptr);
 

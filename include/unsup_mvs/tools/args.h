@@ -33,6 +33,7 @@ class Args {
   std::vector<int> integers(const std::string& name) const;     // comma-separated ints
 
   std::string usage() const;
+  const std::vector<std::string>& names() const { return order_; }  // declared options, in order
 
  private:
   struct Spec {

@@ -1,0 +1,49 @@
+// The output folder of one `umvs train` run and the run's configuration, so that nothing a user
+// had is replaced by accident: a new run starts only in an empty (or new) folder unless the
+// user asks to overwrite, and a resumed run must be the same run (same data, sizes, loss,
+// optimiser, seed, ...) as the one that wrote the folder.
+#pragma once
+
+#include <map>
+#include <string>
+#include <vector>
+
+namespace umvs {
+
+// Option name (without --) -> value as given or defaulted. Stored as OUT/run_config.txt.
+using RunConfig = std::map<std::string, std::string>;
+
+enum class RunStart {
+  kFresh,      // OUT must be missing or empty
+  kResume,     // OUT/last.pt must exist; the options must equal OUT/run_config.txt
+  kOverwrite,  // OUT may hold an earlier run; its files (run_files()) are replaced
+};
+
+// The files `umvs train` writes into its run folder.
+const std::vector<std::string>& run_files();
+constexpr const char* kRunConfigFile = "run_config.txt";
+
+// Checks, without changing anything, that a run may start in `out`. Throws std::invalid_argument
+// naming the problem: OUT is not a folder; kFresh and OUT is not empty (says to give --resume or
+// --overwrite); kResume and OUT/last.pt is missing, or an option differs from OUT/run_config.txt
+// (names the first such option and both values). Options in `may_change` (e.g. the step count) are
+// not compared. A run folder without run_config.txt (written before it existed) is accepted for
+// kResume with a warning on `warnings`.
+void check_run_folder(const std::string& out, RunStart start, const RunConfig& config,
+                      const std::vector<std::string>& may_change, std::string* warnings);
+
+// The first option (in name order) whose value differs, as "--NAME: the run in OUT has A, now B";
+// "" when none. Options missing on one side count as differing ("(not set)").
+std::string run_config_difference(const RunConfig& stored, const RunConfig& current,
+                                  const std::vector<std::string>& may_change);
+
+// One "name=value" line per option. read throws std::runtime_error naming the file when malformed;
+// write (atomic) throws std::invalid_argument for a value with a line break.
+RunConfig read_run_config(const std::string& path);
+void write_run_config(const std::string& path, const RunConfig& config);
+
+// kOverwrite: removes the files of run_files() from `out` (nothing else); throws
+// std::runtime_error naming a file that cannot be removed.
+void remove_run_files(const std::string& out);
+
+}  // namespace umvs

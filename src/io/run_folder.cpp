@@ -1,0 +1,116 @@
+#include "unsup_mvs/io/run_folder.h"
+
+#include <algorithm>
+#include <filesystem>
+#include <fstream>
+#include <stdexcept>
+
+#include "unsup_mvs/io/atomic_file.h"
+#include "unsup_mvs/io/input_limits.h"
+
+namespace umvs {
+
+namespace fs = std::filesystem;
+
+const std::vector<std::string>& run_files() {
+  static const std::vector<std::string> files = {"last.pt", "best.pt", "train_log.csv", "loss_curve.png",
+                                                 kRunConfigFile};
+  return files;
+}
+
+std::string run_config_difference(const RunConfig& stored, const RunConfig& current,
+                                  const std::vector<std::string>& may_change) {
+  RunConfig all = stored;
+  all.insert(current.begin(), current.end());
+  for (const auto& entry : all) {
+    const std::string& name = entry.first;
+    if (std::find(may_change.begin(), may_change.end(), name) != may_change.end()) continue;
+    const auto a = stored.find(name), b = current.find(name);
+    const std::string was = a == stored.end() ? "(not set)" : "'" + a->second + "'";
+    const std::string now = b == current.end() ? "(not set)" : "'" + b->second + "'";
+    if (was != now) return "--" + name + ": the run in this folder has " + was + ", now " + now;
+  }
+  return "";
+}
+
+void check_run_folder(const std::string& out, RunStart start, const RunConfig& config,
+                      const std::vector<std::string>& may_change, std::string* warnings) {
+  std::error_code ec;
+  const auto status = fs::status(out, ec);
+  const bool exists = fs::exists(status);
+  if (exists && !fs::is_directory(status)) throw std::invalid_argument("--out '" + out + "' exists and is not a folder");
+  if (start == RunStart::kFresh && exists) {
+    std::vector<std::string> names;
+    for (const auto& e : fs::directory_iterator(out, ec)) {
+      if (names.size() < 4) names.push_back(e.path().filename().string());
+      else break;
+    }
+    if (ec) throw std::invalid_argument("--out '" + out + "' cannot be listed: " + ec.message());
+    if (!names.empty()) {
+      std::string listed;
+      for (size_t i = 0; i < names.size() && i < 3; ++i) listed += (i ? ", " : "") + names[i];
+      if (names.size() > 3) listed += ", ...";
+      throw std::invalid_argument("--out '" + out + "' is not empty (" + listed +
+                                  "): give --resume to continue the run in it, --overwrite to replace that run, "
+                                  "or a new folder");
+    }
+  }
+  if (start != RunStart::kResume) return;
+  const std::string last = (fs::path(out) / "last.pt").string();
+  if (!fs::exists(last)) throw std::invalid_argument("--resume: " + last + " does not exist");
+  const std::string stored_path = (fs::path(out) / kRunConfigFile).string();
+  if (!fs::exists(stored_path)) {
+    if (warnings) {
+      *warnings += "--resume: " + out + " has no " + kRunConfigFile +
+                   " (written by an older umvs): the options cannot be compared with the run's; they are recorded now\n";
+    }
+    return;
+  }
+  const std::string diff = run_config_difference(read_run_config(stored_path), config, may_change);
+  if (!diff.empty()) {
+    throw std::invalid_argument("--resume must continue the same run: " + diff + " (" + stored_path +
+                                "); start a new run in another folder to change it");
+  }
+}
+
+RunConfig read_run_config(const std::string& path) {
+  checked_file_size(path, kMaxTextFileBytes, "run configuration");
+  std::ifstream in(path);
+  if (!in) throw std::runtime_error("cannot open run configuration '" + path + "'");
+  RunConfig config;
+  int number = 0;
+  for (std::string line; std::getline(in, line);) {
+    ++number;
+    if (line.empty() || line[0] == '#') continue;
+    const auto eq = line.find('=');
+    if (eq == std::string::npos || eq == 0) {
+      throw std::runtime_error("run configuration '" + path + "' line " + std::to_string(number) +
+                               ": expected name=value");
+    }
+    config[line.substr(0, eq)] = line.substr(eq + 1);
+  }
+  return config;
+}
+
+void write_run_config(const std::string& path, const RunConfig& config) {
+  for (const auto& entry : config) {
+    if (entry.first.find_first_of("=\n\r") != std::string::npos || entry.second.find_first_of("\n\r") != std::string::npos) {
+      throw std::invalid_argument("option --" + entry.first + " contains a line break or '=' where it cannot be stored");
+    }
+  }
+  write_file_atomically(path, [&](std::ostream& os) {
+    os << "# the options of this umvs train run: umvs train --resume refuses to change them (docs/training.md)\n";
+    for (const auto& entry : config) os << entry.first << "=" << entry.second << "\n";
+  });
+}
+
+void remove_run_files(const std::string& out) {
+  for (const auto& name : run_files()) {
+    const fs::path p = fs::path(out) / name;
+    std::error_code ec;
+    fs::remove(p, ec);
+    if (ec) throw std::runtime_error("--overwrite: cannot remove " + p.string() + ": " + ec.message());
+  }
+}
+
+}  // namespace umvs

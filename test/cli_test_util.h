@@ -1,0 +1,77 @@
+// Helpers of the command-line fault tests (test_reliability_cli.cpp, test_bag_reliability_cli.cpp):
+// run the built `umvs`, compare files before and after, write small synthetic scenes.
+#pragma once
+
+#include <sys/wait.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <sstream>
+#include <string>
+
+#include "test_util.h"
+#include "unsup_mvs/core/synth.h"
+#include "unsup_mvs/io/synth_writer.h"
+
+namespace umvs::test {
+
+struct Result {
+  int status = -1;     // exit status (-1: killed or not run)
+  std::string output;  // stdout and stderr
+};
+
+// `umvs ARGS` through the shell (arguments are ours, quoted where needed).
+inline Result run_umvs(const std::string& args) {
+  Result r;
+  const std::string cmd = umvs_binary() + " " + args + " 2>&1";
+  FILE* pipe = ::popen(cmd.c_str(), "r");
+  if (!pipe) return r;
+  char buf[4096];
+  for (size_t n; (n = std::fread(buf, 1, sizeof(buf), pipe)) > 0;) r.output.append(buf, n);
+  const int status = ::pclose(pipe);
+  r.status = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return r;
+}
+
+inline bool contains(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
+
+inline std::string file_bytes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+inline void write_bytes(const std::string& path, const std::string& bytes) {
+  std::ofstream out(path, std::ios::binary);
+  out << bytes;
+}
+
+// Every file under `dir` with its content, to show that a refused call changed nothing.
+inline std::map<std::string, std::string> snapshot(const std::string& dir) {
+  std::map<std::string, std::string> files;
+  for (const auto& e : std::filesystem::recursive_directory_iterator(dir)) {
+    if (e.is_regular_file()) files[e.path().string()] = file_bytes(e.path().string());
+  }
+  return files;
+}
+
+// A small synthetic room as an MVSNet folder (exact depth in depth_gt/), written once per name.
+inline std::string scene(const std::string& name, int width = 96, int height = 64, int views = 5) {
+  const std::string dir = temp_dir(name);
+  SynthConfig cfg;
+  cfg.scene = SynthSceneType::kRoom;
+  cfg.seed = 2;
+  cfg.num_views = views;
+  cfg.width = width;
+  cfg.height = height;
+  cfg.lighting_change = false;
+  cfg.supersample = 1;
+  cfg.gt_cloud_samples = 0;
+  write_synthetic_scene(dir, render_synthetic_scene(cfg), cfg);
+  return dir;
+}
+
+}  // namespace umvs::test

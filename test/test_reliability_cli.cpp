@@ -1,0 +1,492 @@
+// Fault injection against the command line (docs/reliability.md, "Command line"): bad arguments,
+// run folders that must not be replaced, broken or hostile files, resource bounds, SIGKILL. Each
+// test checks the error a user sees and that nothing they had changed.
+#include <gtest/gtest.h>
+#include <fcntl.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <torch/torch.h>
+
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <map>
+#include <sstream>
+#include <thread>
+
+#include "cli_test_util.h"
+#include "test_util.h"
+#include "unsup_mvs/core/memory_bounds.h"
+#include "unsup_mvs/io/array_io.h"
+#include "unsup_mvs/io/checkpoint.h"
+#include "unsup_mvs/io/image_io.h"
+#include "unsup_mvs/io/input_limits.h"
+#include "unsup_mvs/io/mvs_folder.h"
+#include "unsup_mvs/io/ply.h"
+#include "unsup_mvs/io/run_folder.h"
+
+extern char** environ;
+
+namespace umvs {
+namespace {
+
+namespace fs = std::filesystem;
+using test::contains;
+using test::file_bytes;
+using test::Result;
+using test::run_umvs;
+using test::scene;
+using test::snapshot;
+using test::write_bytes;
+
+// A random 8-plane model saved as our checkpoint.
+std::string random_model(const std::string& path) {
+  torch::manual_seed(1);
+  MvsNetConfig cfg;
+  cfg.num_depth = 8;
+  MvsNet net(cfg);
+  save_checkpoint(path, net);
+  return path;
+}
+
+const std::string kTrainFlags = " --width 96 --height 64 --num-depth 8 --views-loss 3 --top-k 2 --threads 1 --save-every 2";
+
+// ---------------------------------------------------------------------------------------------
+// umvs train: run folders and arguments (issue 11, items 5 and 6)
+
+TEST(TrainRunFolder, ANonEmptyFolderIsOnlyReplacedWithOverwrite) {
+  const std::string data = scene("rf_data");
+  const std::string out = test::temp_dir("rf_out") + "/run";
+  const std::string common = "train --data " + data + " --val " + data + kTrainFlags + " --out " + out;
+  ASSERT_EQ(run_umvs(common + " --steps 2").status, 0);
+  const auto before = snapshot(out);
+  ASSERT_TRUE(before.count(out + "/best.pt") && before.count(out + "/train_log.csv") && before.count(out + "/run_config.txt"));
+
+  // The same command again, without --resume: refused, naming the way out; nothing changed.
+  Result again = run_umvs(common + " --steps 4 --seed 7");
+  EXPECT_EQ(again.status, 2) << again.output;
+  EXPECT_TRUE(contains(again.output, "is not empty") && contains(again.output, "--overwrite")) << again.output;
+  EXPECT_EQ(snapshot(out), before);
+
+  // A folder with the user's own files is refused the same way and keeps them.
+  const std::string mine = test::temp_dir("rf_mine");
+  write_bytes(mine + "/notes.txt", "mine");
+  Result other = run_umvs("train --data " + data + kTrainFlags + " --steps 2 --out " + mine);
+  EXPECT_EQ(other.status, 2) << other.output;
+  EXPECT_TRUE(contains(other.output, "notes.txt")) << other.output;
+  EXPECT_EQ(file_bytes(mine + "/notes.txt"), "mine");
+  EXPECT_FALSE(fs::exists(mine + "/last.pt"));
+
+  // --overwrite replaces the run: a fresh log with one row per step of the new run.
+  ASSERT_EQ(run_umvs(common + " --steps 4 --seed 7 --overwrite").status, 0);
+  EXPECT_EQ(load_model(out + "/last.pt", torch::kCPU).meta.step, 4);
+  std::ifstream log(out + "/train_log.csv");
+  int lines = 0;
+  for (std::string l; std::getline(log, l);) ++lines;
+  EXPECT_EQ(lines, 5);
+  EXPECT_EQ(read_run_config(out + "/run_config.txt").at("seed"), "7");
+  EXPECT_EQ(run_umvs(common + " --steps 4 --resume --overwrite").status, 2);
+}
+
+TEST(TrainRunFolder, RefusedArgumentsTouchNothing) {
+  const std::string data = scene("ra_data");
+  const std::string out = test::temp_dir("ra_out") + "/run";
+  const std::string common = "train --data " + data + kTrainFlags + " --out " + out;
+  ASSERT_EQ(run_umvs(common + " --steps 2").status, 0);
+  const auto before = snapshot(out);
+  for (const std::string bad : {" --steps -1", " --steps -1 --resume", " --batch 0 --resume", " --save-every 0 --resume",
+                                " --val-tuples -3 --resume", " --augment 2 --resume", " --depth-sampling log --resume"}) {
+    Result r = run_umvs(common + bad);
+    EXPECT_EQ(r.status, 2) << bad << ": " << r.output;
+    EXPECT_EQ(snapshot(out), before) << bad << " changed the run folder";
+  }
+  // A refused call on a new folder does not create it.
+  const std::string fresh = test::temp_dir("ra_fresh") + "/never";
+  EXPECT_EQ(run_umvs("train --data " + data + kTrainFlags + " --steps -1 --out " + fresh).status, 2);
+  EXPECT_FALSE(fs::exists(fresh));
+}
+
+TEST(TrainRunFolder, ResumeWithOtherOptionsIsRefusedNamingTheOption) {
+  const std::string data = scene("rc_data");
+  const std::string out = test::temp_dir("rc_out") + "/run";
+  const std::string common = "train --data " + data + " --val " + data + kTrainFlags + " --out " + out;
+  ASSERT_EQ(run_umvs(common + " --steps 2").status, 0);
+  const auto before = snapshot(out);
+  const RunConfig stored = read_run_config(out + "/run_config.txt");
+  EXPECT_EQ(stored.at("width"), "96");
+  EXPECT_EQ(stored.at("data"), fs::absolute(data).lexically_normal().string());
+
+  struct Change {
+    std::string flags, option;
+  };
+  // Switched resolution, learning rate, loss, and no validation data at all.
+  const std::string no_val = "train --data " + data + kTrainFlags + " --out " + out;
+  for (const auto& c : {Change{common + " --width 128", "--width"}, Change{common + " --lr 0.01", "--lr"},
+                        Change{common + " --loss naive", "--loss"}, Change{no_val, "--val"}}) {
+    Result r = run_umvs(c.flags + " --steps 4 --resume");
+    EXPECT_EQ(r.status, 2) << c.flags << ": " << r.output;
+    EXPECT_TRUE(contains(r.output, c.option + ": the run in this folder has")) << r.output;
+    EXPECT_EQ(snapshot(out), before) << c.flags;
+  }
+  // More steps, other threads: the same run continues.
+  ASSERT_EQ(run_umvs(common + " --steps 4 --threads 2 --resume").status, 0);
+  EXPECT_EQ(load_model(out + "/last.pt", torch::kCPU).meta.step, 4);
+}
+
+TEST(TrainRunFolder, BestModelIsNeverComparedUnderAnotherMetric) {
+  // A run validated on ground truth (best.pt chosen by depth error), written before run_config.txt
+  // existed (removed here), resumed without --val: its training loss must not replace best.pt.
+  const std::string data = scene("bm_data");
+  const std::string out = test::temp_dir("bm_out") + "/run";
+  ASSERT_EQ(run_umvs("train --data " + data + " --val " + data + kTrainFlags + " --steps 2 --out " + out).status, 0);
+  ASSERT_TRUE(load_model(out + "/best.pt", torch::kCPU).meta.metrics.count("val_abs_err"));
+  fs::remove(out + "/run_config.txt");
+  const auto before = snapshot(out);
+  Result r = run_umvs("train --data " + data + kTrainFlags + " --steps 4 --resume --out " + out);
+  EXPECT_EQ(r.status, 2) << r.output;
+  EXPECT_TRUE(contains(r.output, "chosen by val_abs_err") && contains(r.output, "train_total")) << r.output;
+  EXPECT_EQ(snapshot(out), before);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Checkpoints (item 8, and the ones that already behaved)
+
+TEST(CheckpointFaults, NaNWeightsAreRefusedByInferAndTrainInit) {
+  const std::string dir = test::temp_dir("nan_ckpt");
+  const std::string data = scene("nan_data");
+  torch::manual_seed(1);
+  MvsNetConfig cfg;
+  cfg.num_depth = 8;
+  MvsNet net(cfg);
+  {
+    torch::NoGradGuard no_grad;
+    net->named_parameters()["cost_regularization.conv3.conv.weight"].view({-1})[5] = NAN;
+  }
+  save_checkpoint(dir + "/nan.pt", net);
+  try {
+    load_model(dir + "/nan.pt", torch::kCPU);
+    FAIL() << "a NaN model loaded";
+  } catch (const std::runtime_error& e) {
+    EXPECT_TRUE(contains(e.what(), "'cost_regularization.conv3.conv.weight' has 1 non-finite values")) << e.what();
+  }
+  Result infer = run_umvs("infer --data " + data + " --checkpoint " + dir + "/nan.pt --out " + dir + "/infer --threads 1");
+  EXPECT_EQ(infer.status, 1) << infer.output;
+  EXPECT_TRUE(contains(infer.output, "non-finite")) << infer.output;
+  EXPECT_FALSE(fs::exists(dir + "/infer/depth_est/00000000.pfm"));
+  Result train = run_umvs("train --data " + data + kTrainFlags + " --steps 2 --init " + dir + "/nan.pt --out " + dir + "/run");
+  EXPECT_EQ(train.status, 1) << train.output;
+  EXPECT_TRUE(contains(train.output, "non-finite")) << train.output;
+  EXPECT_FALSE(fs::exists(dir + "/run"));
+}
+
+TEST(CheckpointFaults, AFlippedByteFailsTheZipChecksum) {
+  const std::string dir = test::temp_dir("crc_ckpt");
+  const std::string good = random_model(dir + "/good.pt");
+  std::string bytes = file_bytes(good);
+  // A byte of tensor data (the weights are nearly all of the file; no zip record "PK.." near it):
+  // flipped, it still unpickles, into other weights.
+  size_t at = bytes.size() / 2;
+  while (bytes.substr(at - 128, 256).find("PK") != std::string::npos) at += 4096;
+  bytes[at] ^= 0x10;
+  write_bytes(dir + "/flipped.pt", bytes);
+  try {
+    load_model(dir + "/flipped.pt", torch::kCPU);
+    FAIL() << "a damaged checkpoint loaded";
+  } catch (const std::runtime_error& e) {
+    EXPECT_TRUE(contains(e.what(), "CRC-32") && contains(e.what(), "flipped.pt")) << e.what();
+  }
+  const std::string data = scene("crc_data");
+  Result r = run_umvs("infer --data " + data + " --checkpoint " + dir + "/flipped.pt --out " + dir + "/infer --threads 1");
+  EXPECT_EQ(r.status, 1) << r.output;
+  EXPECT_TRUE(contains(r.output, "CRC-32")) << r.output;
+  // The undamaged file still loads: the check does not refuse good checkpoints.
+  EXPECT_NO_THROW(load_model(good, torch::kCPU));
+}
+
+TEST(CheckpointFaults, CorruptWrongArchitectureOversizedAndSpecialFilesAreRefused) {
+  const std::string dir = test::temp_dir("bad_ckpt");
+  const std::string data = scene("bad_ckpt_data");
+  // Not a checkpoint at all (already refused before issue 11).
+  write_bytes(dir + "/garbage.pt", "this is not a checkpoint");
+  Result garbage = run_umvs("infer --data " + data + " --checkpoint " + dir + "/garbage.pt --out " + dir + "/o1");
+  EXPECT_EQ(garbage.status, 1);
+  EXPECT_TRUE(contains(garbage.output, "not a readable model file")) << garbage.output;
+  // Weights of another architecture: a state dict with a mis-shaped tensor (already refused).
+  MvsNet net(MvsNetConfig{});
+  c10::impl::GenericDict d(c10::StringType::get(), c10::TensorType::get());
+  for (const auto& p : net->named_parameters()) d.insert(p.key(), p.value().detach().clone());
+  for (const auto& b : net->named_buffers()) d.insert(b.key(), b.value().detach().clone());
+  d.insert_or_assign("feature.feature.bias", torch::zeros({31}));
+  const auto pickled = torch::pickle_save(c10::IValue(d));
+  write_bytes(dir + "/other_arch.pt", std::string(pickled.begin(), pickled.end()));
+  Result arch = run_umvs("infer --data " + data + " --checkpoint " + dir + "/other_arch.pt --out " + dir + "/o2");
+  EXPECT_EQ(arch.status, 1);
+  EXPECT_TRUE(contains(arch.output, "'feature.feature.bias' has shape [31]")) << arch.output;
+  // Above the size bound (a sparse file: no disk used), a device and a FIFO: refused unread.
+  { std::ofstream(dir + "/huge.pt"); }
+  fs::resize_file(dir + "/huge.pt", kMaxCheckpointBytes + 1);
+  Result huge = run_umvs("infer --data " + data + " --checkpoint " + dir + "/huge.pt --out " + dir + "/o3");
+  EXPECT_EQ(huge.status, 1);
+  EXPECT_TRUE(contains(huge.output, "more than the 512 MiB")) << huge.output;
+  try {
+    load_model("/dev/zero", torch::kCPU);
+    FAIL();
+  } catch (const std::runtime_error& e) {
+    EXPECT_TRUE(contains(e.what(), "is a device, not a regular file")) << e.what();
+  }
+  ASSERT_EQ(::mkfifo((dir + "/fifo.pt").c_str(), 0600), 0);
+  try {
+    load_model(dir + "/fifo.pt", torch::kCPU);
+    FAIL();
+  } catch (const std::runtime_error& e) {
+    EXPECT_TRUE(contains(e.what(), "is a FIFO")) << e.what();
+  }
+  EXPECT_FALSE(fs::exists(dir + "/o1/depth_est/00000000.pfm") || fs::exists(dir + "/o2/depth_est/00000000.pfm"));
+}
+
+// ---------------------------------------------------------------------------------------------
+// umvs infer: depth ranges (item 9) and resource bounds
+
+TEST(InferArguments, ImpossibleDepthRangesAreRefusedAndTheUsedRangeIsSaid) {
+  const std::string dir = test::temp_dir("range");
+  const std::string data = scene("range_data");
+  const std::string model = random_model(dir + "/model.pt");
+  const std::string common = "infer --data " + data + " --checkpoint " + model + " --threads 1 --ref 0 --out " + dir;
+  for (const std::string bad : {" --depth-min -1 --depth-max -0.5", " --depth-min 5 --depth-max 2", " --depth-max -3",
+                                " --depth-min nan"}) {
+    Result r = run_umvs(common + "/bad" + bad);
+    EXPECT_EQ(r.status, 2) << bad << ": " << r.output;
+    EXPECT_TRUE(contains(r.output, "--depth-m")) << r.output;
+    EXPECT_FALSE(fs::exists(dir + "/bad")) << bad;
+  }
+  // Only the near end given, beyond the cam file's far end: the mix is impossible, said per source.
+  const MvsCam cam = read_cam_file(data + "/cams/00000000_cam.txt");
+  const double beyond = cam.resolved_depth_max(8) + 1.0;
+  Result mixed = run_umvs(common + "/mixed --depth-min " + std::to_string(beyond));
+  EXPECT_EQ(mixed.status, 2) << mixed.output;
+  EXPECT_TRUE(contains(mixed.output, "(from --depth-min)") && contains(mixed.output, "(from its cam file)")) << mixed.output;
+  // A valid override: used, and said so next to the cam file's range.
+  Result ok = run_umvs(common + "/ok --depth-min 0.5 --depth-max 6");
+  ASSERT_EQ(ok.status, 0) << ok.output;
+  EXPECT_TRUE(contains(ok.output, "0.5 (from --depth-min) .. 6 (from --depth-max); its cam file gives")) << ok.output;
+  EXPECT_DOUBLE_EQ(read_cam_file(dir + "/ok/cams/00000000_cam.txt").depth_min, 0.5);
+}
+
+TEST(ResourceBounds, PlanesVolumesAndImagesAboveTheBoundsAreRefused) {
+  // The estimates: MVSNet's DTU evaluation size fits, four times its pixels do not.
+  EXPECT_LT(estimated_inference_bytes(1600, 1184, 192, 3), kMaxInferenceBytes);
+  EXPECT_THROW(check_inference_memory(3200, 2368, 192, 3), std::invalid_argument);
+  EXPECT_NO_THROW(check_training_memory(640, 512, 128, 3, 6, 1));
+  EXPECT_THROW(check_training_memory(640, 512, 128, 3, 6, 8), std::invalid_argument);
+  EXPECT_THROW(check_inference_memory(64, 64, kMaxDepthPlanes + 8, 3), std::invalid_argument);
+
+  const std::string dir = test::temp_dir("bounds");
+  const std::string data = scene("bounds_data");
+  const std::string model = random_model(dir + "/model.pt");
+  Result planes = run_umvs("infer --data " + data + " --checkpoint " + model + " --num-depth 2048 --out " + dir + "/o");
+  EXPECT_EQ(planes.status, 2) << planes.output;
+  EXPECT_TRUE(contains(planes.output, "2048 depth planes, more than the 1024 accepted")) << planes.output;
+  EXPECT_FALSE(fs::exists(dir + "/o"));
+  Result big = run_umvs("train --data " + data + " --width 2048 --height 1536 --num-depth 256 --out " + dir + "/t");
+  EXPECT_EQ(big.status, 2) << big.output;
+  EXPECT_TRUE(contains(big.output, "of memory, more than the 12.0 GiB accepted")) << big.output;
+  EXPECT_FALSE(fs::exists(dir + "/t"));
+
+  // A 60-byte PNG that claims 100000 x 100000 pixels: refused from its header, never decoded.
+  std::string png("\x89PNG\r\n\x1a\n\0\0\0\x0dIHDR", 16);
+  const unsigned char size[8] = {0x00, 0x01, 0x86, 0xA0, 0x00, 0x01, 0x86, 0xA0};
+  png.append(reinterpret_cast<const char*>(size), 8);
+  png.append(std::string("\x08\x02\0\0\0", 5) + std::string(27, '\0'));
+  write_bytes(dir + "/bomb.png", png);
+  try {
+    read_image_rgb8(dir + "/bomb.png");
+    FAIL();
+  } catch (const std::runtime_error& e) {
+    EXPECT_TRUE(contains(e.what(), "100000x100000")) << e.what();
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Readers and umvs eval cloud (item 10)
+
+std::string ply_header(const std::string& format, uint64_t count) {
+  return "ply\nformat " + format + " 1.0\nelement vertex " + std::to_string(count) +
+         "\nproperty float x\nproperty float y\nproperty float z\nend_header\n";
+}
+
+TEST(ReaderFaults, EmptyAndNonFiniteCloudsAreRefusedWithTheReason) {
+  const std::string dir = test::temp_dir("clouds");
+  PointCloud gt;
+  for (int i = 0; i < 50; ++i) gt.points.emplace_back(0.01f * i, 0.f, 1.f);
+  write_ply(dir + "/gt.ply", gt);
+  write_ply(dir + "/empty.ply", PointCloud());
+  PointCloud nan_cloud = gt;
+  nan_cloud.points[7].y() = NAN;
+  write_ply(dir + "/nan_binary.ply", nan_cloud);
+  write_bytes(dir + "/nan_ascii.ply", ply_header("ascii", 2) + "0 0 1\n0 nan 1\n");
+  struct Case {
+    std::string file, reason;
+  };
+  for (const auto& c : {Case{"empty.ply", "has no points"}, Case{"nan_binary.ply", "vertex 7 has a non-finite coordinate"},
+                        Case{"nan_ascii.ply", "vertex 1 has a non-finite coordinate"}}) {
+    Result r = run_umvs("eval cloud --est " + dir + "/" + c.file + " --gt " + dir + "/gt.ply");
+    EXPECT_EQ(r.status, 1) << c.file << ": " << r.output;
+    EXPECT_TRUE(contains(r.output, c.reason)) << c.file << ": " << r.output;
+    EXPECT_FALSE(contains(r.output, "nan ")) << r.output;
+  }
+  Result ok = run_umvs("eval cloud --est " + dir + "/gt.ply --gt " + dir + "/gt.ply --json");
+  EXPECT_EQ(ok.status, 0) << ok.output;
+  EXPECT_TRUE(contains(ok.output, "\"accuracy_mean\": 0,")) << ok.output;
+}
+
+TEST(ReaderFaults, CountsClaimedByHeadersAreBoundedByTheFileSize) {
+  const std::string dir = test::temp_dir("claims");
+  auto refused = [](const std::function<void()>& read, const std::string& reason) {
+    try {
+      read();
+      ADD_FAILURE() << "accepted; expected: " << reason;
+    } catch (const std::runtime_error& e) {
+      EXPECT_TRUE(contains(e.what(), reason)) << e.what();
+    }
+  };
+  // 5e9 vertices claimed, 3 present (binary and ASCII): refused before any allocation.
+  write_bytes(dir + "/binary.ply", ply_header("binary_little_endian", 5000000000ull) + std::string(36, '\0'));
+  write_bytes(dir + "/ascii.ply", ply_header("ascii", 5000000000ull) + "0 0 1\n0 1 1\n1 0 1\n");
+  refused([&] { read_ply(dir + "/binary.ply"); }, "vertex count: the header claims 5000000000");
+  refused([&] { read_ply(dir + "/ascii.ply"); }, "vertex count: the header claims 5000000000");
+  std::string negative = ply_header("ascii", 1);
+  negative.replace(negative.find("vertex 1"), 8, "vertex -1");
+  write_bytes(dir + "/negative.ply", negative + "0 0 1\n");
+  refused([&] { read_ply(dir + "/negative.ply"); }, "malformed element line");
+  Result eval = run_umvs("eval cloud --est " + dir + "/binary.ply --gt " + dir + "/ascii.ply");
+  EXPECT_EQ(eval.status, 1);
+  EXPECT_TRUE(contains(eval.output, "the header claims 5000000000")) << eval.output;
+  // pair.txt claiming 1.5e9 views, or one view with 2e9 sources.
+  write_bytes(dir + "/pair.txt", "1500000000\n0\n1 1 1.0\n");
+  refused([&] { read_pair_file(dir + "/pair.txt"); }, "number of views: the header claims 1500000000");
+  write_bytes(dir + "/pair2.txt", "1\n0\n2000000000 1 1.0\n");
+  refused([&] { read_pair_file(dir + "/pair2.txt"); }, "number of sources of view 0: the header claims 2000000000");
+  // NPY and PFM whose shapes claim far more than the file holds (and would overflow 64 bits).
+  std::string npy_header = "{'descr': '<f4', 'fortran_order': False, 'shape': (100000000000, 100000000000, 100000000000), }";
+  npy_header += std::string(63 - (10 + npy_header.size()) % 64, ' ') + "\n";
+  std::string npy("\x93NUMPY\x01\x00", 8);
+  npy += static_cast<char>(npy_header.size() & 0xff);
+  npy += static_cast<char>(npy_header.size() >> 8);
+  write_bytes(dir + "/a.npy", npy + npy_header + std::string(16, '\0'));
+  refused([&] { read_npy(dir + "/a.npy"); }, "array dimension: the header claims 100000000000");
+  write_bytes(dir + "/a.pfm", "Pf\n100000 100000\n-1\n" + std::string(16, '\0'));
+  refused([&] { read_pfm(dir + "/a.pfm"); }, "PFM values: the header claims 10000000000");
+  // A cam file whose DEPTH_NUM is no plane count.
+  write_bytes(dir + "/cam.txt", "extrinsic\n1 0 0 0\n0 1 0 0\n0 0 1 0\n0 0 0 1\n\nintrinsic\n100 0 32\n0 100 32\n0 0 1\n\n"
+                                "1 0.1 1e12\n");
+  refused([&] { read_cam_file(dir + "/cam.txt"); }, "DEPTH_NUM must be a whole number");
+  // Readers refuse what is not a regular file instead of blocking on it or reading it forever.
+  ASSERT_EQ(::mkfifo((dir + "/fifo.ply").c_str(), 0600), 0);
+  refused([&] { read_ply(dir + "/fifo.ply"); }, "is a FIFO");
+  refused([&] { read_pfm("/dev/zero"); }, "is a device");
+}
+
+// ---------------------------------------------------------------------------------------------
+// SIGKILL (already behaved before issue 11; kept so)
+
+// Starts `umvs ARGS...` without a shell, output discarded.
+pid_t spawn_umvs(const std::vector<std::string>& args) {
+  std::vector<std::string> all = {test::umvs_binary()};
+  all.insert(all.end(), args.begin(), args.end());
+  std::vector<char*> argv;
+  for (auto& a : all) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  posix_spawn_file_actions_t actions;
+  posix_spawn_file_actions_init(&actions);
+  posix_spawn_file_actions_addopen(&actions, 1, "/dev/null", O_WRONLY, 0);
+  posix_spawn_file_actions_addopen(&actions, 2, "/dev/null", O_WRONLY, 0);
+  pid_t pid = -1;
+  const int rc = posix_spawn(&pid, argv[0], &actions, nullptr, argv.data(), environ);
+  posix_spawn_file_actions_destroy(&actions);
+  return rc == 0 ? pid : -1;
+}
+
+// Polls `ready` every millisecond while `pid` runs; SIGKILLs it once `ready` holds. True when
+// the kill hit the running process (false: it had exited first).
+bool kill_when(pid_t pid, const std::function<bool()>& ready) {
+  int status = 0;
+  while (::waitpid(pid, &status, WNOHANG) == 0) {
+    if (ready()) {
+      ::kill(pid, SIGKILL);
+      ::waitpid(pid, &status, 0);
+      return WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  return false;
+}
+
+int log_rows(const std::string& path) {
+  std::ifstream in(path);
+  int n = -1;
+  for (std::string l; std::getline(in, l);) ++n;
+  return n;
+}
+
+TEST(KillFaults, TrainingKilledMidRunResumesToTheUninterruptedModel) {
+  const std::string data = scene("kill_train_data");
+  const std::string dir = test::temp_dir("kill_train");
+  const std::vector<std::string> common = {"train", "--data", data, "--width", "96", "--height", "64", "--num-depth", "8",
+                                           "--views-loss", "3", "--top-k", "2", "--threads", "1", "--save-every", "2"};
+  auto with = [&](std::vector<std::string> extra) {
+    std::vector<std::string> a = common;
+    a.insert(a.end(), extra.begin(), extra.end());
+    return a;
+  };
+  // Killed after its third step (a checkpoint at step 2 exists), long before its 1000 steps.
+  const pid_t pid = spawn_umvs(with({"--steps", "1000", "--out", dir + "/killed"}));
+  ASSERT_GT(pid, 0);
+  ASSERT_TRUE(kill_when(pid, [&] { return log_rows(dir + "/killed/train_log.csv") >= 3; }));
+  const int64_t at = load_model(dir + "/killed/last.pt", torch::kCPU).meta.step;
+  ASSERT_GE(at, 2);
+  const std::string target = std::to_string(at + 2);
+  ASSERT_EQ(run_umvs("train --data " + data + kTrainFlags + " --steps " + target + " --resume --out " + dir + "/killed").status, 0);
+  ASSERT_EQ(run_umvs("train --data " + data + kTrainFlags + " --steps " + target + " --out " + dir + "/straight").status, 0);
+  auto a = load_model(dir + "/killed/last.pt", torch::kCPU), b = load_model(dir + "/straight/last.pt", torch::kCPU);
+  EXPECT_EQ(a.meta.step, at + 2);
+  for (const auto& p : b.model->named_parameters()) {
+    EXPECT_TRUE(torch::equal(p.value(), a.model->named_parameters()[p.key()])) << p.key();
+  }
+  EXPECT_EQ(log_rows(dir + "/killed/train_log.csv"), at + 2);
+}
+
+TEST(KillFaults, FusionKilledWhileWritingKeepsThePreviousCloud) {
+  // Exact depth of 6 views at 320x256 fuses to a cloud of a few MB: a kill while its temporary
+  // file exists lands in the middle of writing it.
+  const std::string data = scene("kill_fuse_data", 320, 256, 6);
+  const std::string dir = test::temp_dir("kill_fuse");
+  const std::vector<std::string> args = {"fuse", "--depth", data + "/depth_gt", "--data", data, "--min-confidence", "0",
+                                         "--min-views", "1", "--threads", "1", "--out", dir + "/cloud.ply"};
+  ASSERT_EQ(run_umvs("fuse --depth " + data + "/depth_gt --data " + data +
+                 " --min-confidence 0 --min-views 1 --threads 1 --out " + dir + "/cloud.ply").status, 0);
+  const std::string before = file_bytes(dir + "/cloud.ply");
+  ASSERT_GT(read_ply(dir + "/cloud.ply").size(), 10000u);
+  bool killed_while_writing = false;
+  for (int attempt = 0; attempt < 5 && !killed_while_writing; ++attempt) {
+    const pid_t pid = spawn_umvs(args);
+    ASSERT_GT(pid, 0);
+    // The temporary file (whatever its name) is the only other entry of the folder.
+    killed_while_writing = kill_when(pid, [&] {
+      for (const auto& e : fs::directory_iterator(dir)) {
+        if (e.path().filename() != "cloud.ply") return true;
+      }
+      return false;
+    });
+    EXPECT_EQ(file_bytes(dir + "/cloud.ply"), before) << "attempt " << attempt;
+    for (const auto& e : fs::directory_iterator(dir)) {
+      if (e.path().filename() != "cloud.ply") fs::remove(e.path());  // the killed writer's leftover
+    }
+  }
+  EXPECT_TRUE(killed_while_writing) << "the fusion finished writing before it could be killed, 5 times";
+}
+
+}  // namespace
+}  // namespace umvs
