@@ -8,6 +8,7 @@
 #include <limits>
 #include <stdexcept>
 
+#include "unsup_mvs/core/synth_textures.h"
 #include "unsup_mvs/core/view_selection.h"
 
 namespace umvs {
@@ -104,14 +105,16 @@ struct Material {
   Vec3 accent{0.1, 0.12, 0.18};           // grout or window-glass colour
   double specular = 0.0;    // Blinn-Phong weight when specular highlights are on
   uint64_t seed = 0;
+  PhotoMapping photo;       // photo.texture >= 0: a photograph replaces the noise
 };
 
 // Albedo at surface point `q` (primitive-local coordinates) whose in-surface axes are `ua`, `va`.
-Vec3 albedo(const Material& m, const Vec3& q, int ua, int va, double strength_scale) {
+// `photo`: the photograph's colour there when the material wears one (instead of the noise).
+Vec3 albedo(const Material& m, const Vec3& q, int ua, int va, double strength_scale, const Vec3* photo = nullptr) {
   const double s = std::clamp(m.strength * strength_scale, 0.0, 2.0);
-  const double n = fbm(q / m.scale, m.seed, m.octaves);
+  const double n = photo ? 0.5 : fbm(q / m.scale, m.seed, m.octaves);
   const double c = std::clamp(0.5 + 2.6 * (n - 0.5) * s, 0.0, 1.0);
-  Vec3 col = m.color_a + (m.color_b - m.color_a) * c;
+  Vec3 col = photo ? *photo : Vec3(m.color_a + (m.color_b - m.color_a) * c);
   const double u = q[ua], v = q[va];
   auto frac = [](double x) { return x - std::floor(x); };
   switch (m.pattern) {
@@ -135,6 +138,7 @@ Vec3 albedo(const Material& m, const Vec3& q, int ua, int va, double strength_sc
       break;
     }
     case Pattern::kWood: {
+      if (photo) break;  // the photograph has its own grain
       const double ring = 0.5 + 0.5 * std::sin(2.0 * kPi * (u / m.period_u + 3.0 * (n - 0.5)));
       col *= 1.0 + 0.3 * (ring - 0.5) * std::min(s, 1.0);
       break;
@@ -323,6 +327,16 @@ struct CameraPlan {
   Vec3 random_eye_min = Vec3::Zero(), random_eye_max = Vec3::Ones();
   Vec3 random_target_min = Vec3::Zero(), random_target_max = Vec3::Ones();
   double clearance = 0.1;  // random eyes keep this distance from every solid
+  // Drive / turn (a ground robot): the eye at a height drawn in [height_min, height_max], starting
+  // near robot_start (x, y) facing robot_heading_deg (+- 10 degrees). Drive: steps of about
+  // robot_step (at most robot_max_travel in all) along the heading, which turns slowly; the eye
+  // stays inside [robot_bounds_min, robot_bounds_max] (x, y) and clear of every solid. Turn: the
+  // heading sweeps 60-120 degrees with the eye robot_arm in front of a fixed vertical axis.
+  Vec3 robot_start = Vec3::Zero();
+  double robot_heading_deg = 0.0, robot_pitch_deg = 0.0;
+  double robot_height_min = 0.3, robot_height_max = 1.5;
+  double robot_step = 0.1, robot_max_travel = 2.0, robot_turn_deg_per_step = 2.0, robot_arm = 0.2;
+  Vec3 robot_bounds_min = Vec3::Constant(-1e9), robot_bounds_max = Vec3::Constant(1e9);
 };
 
 struct LightPlan {
@@ -422,10 +436,74 @@ SceneDef dtu_like_scene(Rng& rng) {
   c.path_yaw_offset_deg = 90.0;  // looking at the table while sliding past it
   c.path_pitch_deg = -30.0;
   c.path_yaw_wobble_deg = 3.0;
+  // A small robot approaching the table (table-top scale, like the rest of this scene).
+  c.robot_start = Vec3(0.0, -0.62, 0.0);
+  c.robot_heading_deg = 90.0;
+  c.robot_pitch_deg = -22.0;
+  c.robot_height_min = 0.12;
+  c.robot_height_max = 0.3;
+  c.robot_step = 0.012;
+  c.robot_max_travel = 0.22;
+  c.robot_turn_deg_per_step = 1.0;
+  c.robot_arm = 0.04;
+  c.robot_bounds_min = Vec3(-0.5, -0.8, 0.0);
+  c.robot_bounds_max = Vec3(0.5, -0.35, 0.0);
   s.light.base = Vec3(0.3, -0.6, 0.9);
   s.light.pivot = Vec3::Zero();
   s.natural = SynthTrajectory::kOrbit;
   return s;
+}
+
+// More furniture for the room: chairs at the table, a bookshelf with books, a floor lamp, a rug
+// and a wall-mounted television (dark, glossy and textureless), all off the robot's lane
+// (y in [-1.1, -0.2]). Drawn after the rest of the layout.
+void add_room_furniture(SceneDef* s, Rng& rng, double X, double Y, const Vec3& table_c, double pillar_x) {
+  auto& prims = s->prims;
+  Material chair_m = random_material(rng, rng.uniform(0.04, 0.1));
+  for (int side : {-1, 1}) {
+    const Vec3 seat = table_c + Vec3(side * 0.85, rng.uniform(-0.1, 0.1), -0.3);  // seat at 0.45 m
+    prims.push_back(make(Shape::kBox, seat, Vec3(0.22, 0.22, 0.02), chair_m));
+    for (int lx : {-1, 1})
+      for (int ly : {-1, 1})
+        prims.push_back(make(Shape::kCylinder, seat + Vec3(lx * 0.19, ly * 0.19, -0.235), Vec3(0.015, 0.015, 0.215), chair_m));
+    prims.push_back(make(Shape::kBox, seat + Vec3(side * 0.2, 0, 0.25), Vec3(0.02, 0.22, 0.23), chair_m));
+  }
+  // Bookshelf against the -y wall, on the side away from the pillar; two rows of books.
+  const double shelf_x = pillar_x > 0 ? rng.uniform(-2.2, -1.2) : rng.uniform(1.2, 2.2);
+  Material shelf_m = random_material(rng, 0.15, 0.5);
+  const double shelf_half_w = rng.uniform(0.4, 0.6);
+  prims.push_back(make(Shape::kBox, Vec3(shelf_x, -Y + 0.16, 0.9), Vec3(shelf_half_w, 0.15, 0.9), shelf_m));
+  for (double z : {0.55, 1.25}) {
+    double x = shelf_x - shelf_half_w + 0.03;
+    while (true) {
+      const double w = rng.uniform(0.015, 0.04), h = rng.uniform(0.09, 0.15);
+      if (x + 2 * w > shelf_x + shelf_half_w - 0.03) break;
+      Material book = random_material(rng, 0.02, rng.uniform(0.1, 1.0));
+      prims.push_back(make(Shape::kBox, Vec3(x + w, -Y + 0.33, z + h), Vec3(w, 0.03, h), book));
+      x += 2 * w + rng.uniform(0.0, 0.05);
+    }
+  }
+  // Floor lamp near the sofa, a rug under the table.
+  Material metal = random_material(rng, 0.05, 0.1);
+  metal.specular = 0.8;
+  const Vec3 lamp(rng.uniform(-2.3, 2.3), 1.35, 0.0);
+  prims.push_back(make(Shape::kCylinder, lamp + Vec3(0, 0, 0.75), Vec3(0.015, 0.015, 0.75), metal));
+  Material shade = random_material(rng, 0.05, 0.3);
+  prims.push_back(make(Shape::kCylinder, lamp + Vec3(0, 0, 1.55), Vec3(0.18, 0.18, 0.14), shade));
+  Material rug = random_material(rng, rng.uniform(0.05, 0.15), 1.3);
+  if (rng.uniform() < 0.5) {
+    rug.pattern = Pattern::kTiles;
+    rug.period_u = rug.period_v = rng.uniform(0.1, 0.3);
+    rug.accent = rug.color_b * 0.5;
+  }
+  prims.push_back(make(Shape::kBox, Vec3(table_c.x(), table_c.y(), 0.004), Vec3(1.0, 0.6, 0.004), rug, rng.uniform(-0.2, 0.2)));
+  Material screen;  // a switched-off television: textureless and specular
+  screen.color_a = Vec3(0.03, 0.03, 0.035);
+  screen.color_b = Vec3(0.06, 0.06, 0.07);
+  screen.strength = 0.05;
+  screen.specular = 0.9;
+  screen.seed = rng.bits();
+  prims.push_back(make_rect(Vec3(-X + 0.04, rng.uniform(-0.3, 1.2), 1.3), Vec3::UnitX(), -Vec3::UnitY(), 0.55, 0.32, screen));
 }
 
 SceneDef room_scene(Rng& rng) {
@@ -504,6 +582,7 @@ SceneDef room_scene(Rng& rng) {
   }
   Material pillar = random_material(rng, 0.3);
   s.prims.push_back(make(Shape::kCylinder, Vec3(rng.uniform(-1.5, 1.5), rng.uniform(-2.2, -1.7), Z / 2), Vec3(0.18, 0.18, Z / 2), pillar));
+  const double pillar_x = s.prims.back().center.x();
   // Clutter on the floor (boxes and balls), away from the robot path at y ~ -0.6.
   const int n = rng.integer(3, 5);
   for (int i = 0; i < n; ++i) {
@@ -517,6 +596,7 @@ SceneDef room_scene(Rng& rng) {
       s.prims.push_back(make(Shape::kSphere, at + Vec3(0, 0, r), Vec3::Constant(r), m));
     }
   }
+  add_room_furniture(&s, rng, X, Y, table_c, pillar_x);
   s.background = Background::kBlack;  // never seen: the room is closed
   CameraPlan& c = s.cameras;
   c.focal = 0.8;
@@ -536,6 +616,15 @@ SceneDef room_scene(Rng& rng) {
   c.random_target_min = Vec3(-X, -Y, 0.3);
   c.random_target_max = Vec3(X, Y, 1.6);
   c.clearance = 0.25;
+  c.robot_start = Vec3(-2.1, -0.65, 0.0);
+  c.robot_heading_deg = 0.0;
+  c.robot_pitch_deg = -5.0;
+  c.robot_step = 0.1;
+  c.robot_max_travel = 3.6;
+  c.robot_turn_deg_per_step = 2.0;
+  c.robot_arm = 0.15;
+  c.robot_bounds_min = Vec3(-2.35, -1.1, 0.0);
+  c.robot_bounds_max = Vec3(2.35, -0.2, 0.0);
   s.light.base = Vec3(0.5, 0.0, Z - 0.2);
   s.light.pivot = Vec3(0.0, 0.0, Z - 0.2);
   s.light.ambient = 0.4;
@@ -626,10 +715,154 @@ SceneDef facade_scene(Rng& rng) {
   c.random_target_min = Vec3(-20, 7.0, 1.0);
   c.random_target_max = Vec3(20, 7.5, 10.0);
   c.clearance = 0.5;
+  // A robot (or a car's camera) on the road, looking along the street.
+  c.robot_start = Vec3(-10.0, -2.0, 0.0);
+  c.robot_heading_deg = 0.0;
+  c.robot_pitch_deg = 3.0;
+  c.robot_step = 0.4;
+  c.robot_max_travel = 20.0;
+  c.robot_turn_deg_per_step = 1.0;
+  c.robot_arm = 0.3;
+  c.robot_bounds_min = Vec3(-30.0, -6.0, 0.0);
+  c.robot_bounds_max = Vec3(30.0, 0.5, 0.0);
   s.light.base = Vec3(4000, -6000, 7000);  // the sun
   s.light.pivot = Vec3::Zero();
   s.light.ambient = 0.4;
   s.natural = SynthTrajectory::kForward;
+  return s;
+}
+
+SceneDef corridor_scene(Rng& rng) {
+  SceneDef s;
+  const double L = rng.uniform(10.0, 15.0);  // half length, along x
+  const double W = rng.uniform(0.9, 1.4);    // half width, along y
+  const double Z = rng.uniform(2.4, 3.0);
+  Material floor = random_material(rng, rng.uniform(0.2, 0.5), 0.6);  // linoleum or tiles
+  floor.color_a = floor.color_a * 0.6 + Vec3::Constant(0.15);
+  if (rng.uniform() < 0.6) {
+    floor.pattern = Pattern::kTiles;
+    floor.period_u = floor.period_v = rng.uniform(0.3, 0.6);
+    floor.accent = floor.color_a * 0.6;
+  }
+  s.prims.push_back(make_rect(Vec3(0, 0, 0), Vec3::UnitZ(), Vec3::UnitX(), L, W, floor));
+  Material ceiling;  // weakly textured
+  ceiling.color_a = Vec3(0.78, 0.78, 0.76);
+  ceiling.color_b = Vec3(0.93, 0.93, 0.9);
+  ceiling.strength = 0.05;
+  ceiling.scale = 0.5;
+  ceiling.seed = rng.bits();
+  s.prims.push_back(make_rect(Vec3(0, 0, Z), -Vec3::UnitZ(), Vec3::UnitX(), L, W, ceiling));
+  Material panel;  // ceiling lights: bright and textureless
+  panel.color_a = Vec3(0.95, 0.95, 0.92);
+  panel.color_b = Vec3(1.0, 1.0, 0.97);
+  panel.strength = 0.02;
+  panel.seed = rng.bits();
+  for (double x = -L + rng.uniform(0.8, 1.5); x < L - 0.5; x += rng.uniform(2.0, 3.0)) {
+    s.prims.push_back(make_rect(Vec3(x, 0, Z - 0.01), -Vec3::UnitZ(), Vec3::UnitX(), 0.3, 0.5 * W, panel));
+  }
+  Material skirting = random_material(rng, 0.1, 0.1);
+  for (double side : {-1.0, 1.0}) {
+    const Vec3 inward = -side * Vec3::UnitY();
+    Material wall = random_material(rng, rng.uniform(0.2, 0.8), rng.uniform() < 0.3 ? 0.05 : 0.7);
+    wall.color_a = wall.color_a * 0.5 + Vec3::Constant(0.35);
+    wall.color_b = wall.color_b * 0.3 + Vec3::Constant(0.6);
+    s.prims.push_back(make_rect(Vec3(0, side * W, Z / 2), inward, Vec3::UnitX(), L, Z / 2, wall));
+    Material end_wall = random_material(rng, rng.uniform(0.2, 0.6), 0.8);
+    s.prims.push_back(make_rect(Vec3(side * L, 0, Z / 2), -side * Vec3::UnitX(), Vec3::UnitY(), W, Z / 2, end_wall));
+    s.prims.push_back(make(Shape::kBox, Vec3(0, side * (W - 0.01), 0.05), Vec3(L, 0.01, 0.05), skirting));
+    // What lines a corridor, one after another along the wall; nothing sticks out more than
+    // 0.45 m, which keeps the middle free for the robot.
+    const double wall_y = side * W;
+    for (double x = -L + rng.uniform(0.5, 2.0); x < L - 1.5;) {
+      double width = 1.0;
+      switch (rng.integer(0, 5)) {
+        case 0: {  // a door with a handle
+          Material door = random_material(rng, rng.uniform(0.05, 0.2), rng.uniform() < 0.4 ? 0.05 : 0.8);
+          if (rng.uniform() < 0.5) {
+            door.pattern = Pattern::kWood;
+            door.period_u = rng.uniform(0.03, 0.08);
+          }
+          s.prims.push_back(make_rect(Vec3(x + 0.5, wall_y + inward.y() * 0.02, 1.03), inward, Vec3::UnitX(), 0.46, 1.03, door));
+          Material handle = random_material(rng, 0.01, 0.1);
+          handle.specular = 0.9;
+          s.prims.push_back(make(Shape::kSphere, Vec3(x + 0.85, wall_y + inward.y() * 0.07, 1.0), Vec3::Constant(0.03), handle));
+          break;
+        }
+        case 1: {  // a pillar
+          width = 0.4;
+          s.prims.push_back(make(Shape::kBox, Vec3(x + 0.2, wall_y + inward.y() * 0.15, Z / 2), Vec3(0.2, 0.15, Z / 2),
+                                 random_material(rng, rng.uniform(0.2, 0.5), 0.5)));
+          break;
+        }
+        case 2: {  // a ribbed radiator
+          Material rad = random_material(rng, 0.1, 0.3);
+          rad.pattern = Pattern::kTiles;
+          rad.period_u = 0.05;
+          rad.period_v = 1.0;
+          rad.accent = rad.color_a * 0.5;
+          s.prims.push_back(make(Shape::kBox, Vec3(x + 0.5, wall_y + inward.y() * 0.07, 0.45), Vec3(0.5, 0.05, 0.3), rad));
+          break;
+        }
+        case 3: {  // a bench
+          width = 1.4;
+          Material bench = random_material(rng, rng.uniform(0.05, 0.15));
+          s.prims.push_back(make(Shape::kBox, Vec3(x + 0.7, wall_y + inward.y() * 0.22, 0.45), Vec3(0.7, 0.2, 0.03), bench));
+          for (double lx : {0.1, 1.3})
+            s.prims.push_back(make(Shape::kBox, Vec3(x + lx, wall_y + inward.y() * 0.22, 0.21), Vec3(0.03, 0.18, 0.21), bench));
+          break;
+        }
+        case 4: {  // a notice board full of posters
+          width = 1.2;
+          Material board = random_material(rng, rng.uniform(0.03, 0.1), 1.3);
+          s.prims.push_back(make_rect(Vec3(x + 0.6, wall_y + inward.y() * 0.015, 1.5), inward, Vec3::UnitX(), 0.6, 0.4, board));
+          break;
+        }
+        default: {  // a bin and a fire extinguisher
+          width = 0.6;
+          s.prims.push_back(make(Shape::kCylinder, Vec3(x + 0.2, wall_y + inward.y() * 0.25, 0.35), Vec3(0.18, 0.18, 0.35),
+                                 random_material(rng, 0.05, 0.4)));
+          Material red = random_material(rng, 0.05, 0.15);
+          red.color_a = Vec3(0.5, 0.04, 0.03);
+          red.color_b = Vec3(0.8, 0.1, 0.08);
+          red.specular = 0.6;
+          s.prims.push_back(make(Shape::kCylinder, Vec3(x + 0.5, wall_y + inward.y() * 0.1, 0.6), Vec3(0.08, 0.08, 0.25), red));
+          break;
+        }
+      }
+      x += width + rng.uniform(0.5, 2.5);
+    }
+  }
+  s.background = Background::kBlack;  // never seen: the corridor is closed
+  CameraPlan& c = s.cameras;
+  c.focal = 0.8;
+  c.path_start = Vec3(-L + 1.0, 0.0, 1.5);
+  c.path_end = Vec3(L - 2.0, 0.0, 1.5);
+  c.path_yaw_offset_deg = 0.0;
+  c.path_pitch_deg = -3.0;
+  c.path_yaw_wobble_deg = 5.0;
+  c.orbit_center = Vec3(0, 0, 1.2);
+  c.orbit_radius = 0.6 * W;
+  c.orbit_elevation_deg = 0.0;
+  c.orbit_elevation_jitter_deg = 3.0;
+  c.orbit_span_deg = 120.0;
+  c.random_eye_min = Vec3(-L + 1.0, -W + 0.5, 0.3);
+  c.random_eye_max = Vec3(L - 1.0, W - 0.5, 1.6);
+  c.random_target_min = Vec3(-L, -W, 0.3);
+  c.random_target_max = Vec3(L, W, 2.0);
+  c.clearance = 0.25;
+  c.robot_start = Vec3(-L + 1.0, 0.0, 0.0);
+  c.robot_heading_deg = 0.0;
+  c.robot_pitch_deg = 0.0;
+  c.robot_step = 0.15;
+  c.robot_max_travel = 2 * L - 3.0;
+  c.robot_turn_deg_per_step = 1.0;
+  c.robot_arm = 0.2;
+  c.robot_bounds_min = Vec3(-L + 0.6, -W + 0.5, 0.0);
+  c.robot_bounds_max = Vec3(L - 0.6, W - 0.5, 0.0);
+  s.light.base = Vec3(0.0, 0.0, Z - 0.2);
+  s.light.pivot = Vec3(0.0, 0.0, Z - 0.2);
+  s.light.ambient = 0.45;
+  s.natural = SynthTrajectory::kDrive;
   return s;
 }
 
@@ -662,7 +895,51 @@ bool inside_any(const std::vector<Primitive>& prims, const Vec3& x, double margi
   return false;
 }
 
+// A ground robot's camera: driving forward and turning slowly (kDrive) or turning in place (kTurn).
+std::vector<Camera> plan_robot_path(const SceneDef& scene, const SynthConfig& cfg, SynthTrajectory traj, Rng& rng) {
+  const CameraPlan& c = scene.cameras;
+  const int n = cfg.num_views;
+  const double height = rng.uniform(c.robot_height_min, c.robot_height_max);
+  const double pitch = deg2rad(c.robot_pitch_deg + rng.uniform(-4.0, 4.0));
+  double yaw = deg2rad(c.robot_heading_deg + rng.uniform(-10.0, 10.0));
+  const double jitter = 0.1 * c.robot_step * n;  // start-position spread, in the path's scale
+  auto clear = [&](const Vec3& p) {
+    return (p.head<2>().array() >= c.robot_bounds_min.head<2>().array()).all() &&
+           (p.head<2>().array() <= c.robot_bounds_max.head<2>().array()).all() && !inside_any(scene.prims, p, c.clearance);
+  };
+  Vec3 pos(c.robot_start.x() + rng.uniform(-jitter, jitter), c.robot_start.y() + rng.uniform(-jitter, jitter), height);
+  if (!clear(pos)) pos = Vec3(c.robot_start.x(), c.robot_start.y(), height);
+  std::vector<Camera> cams;
+  auto add = [&](const Vec3& eye, double heading) {
+    const Vec3 dir(std::cos(pitch) * std::cos(heading), std::cos(pitch) * std::sin(heading), std::sin(pitch));
+    cams.push_back(look_at(eye, eye + dir, cfg.width, cfg.height, c.focal));
+  };
+  if (traj == SynthTrajectory::kTurn) {
+    const double span = deg2rad(rng.uniform(60.0, 120.0)) * (rng.uniform() < 0.5 ? -1.0 : 1.0);
+    const double arm = c.robot_arm * rng.uniform(0.6, 1.4);
+    for (int i = 0; i < n; ++i) {
+      const double heading = yaw + (n > 1 ? (static_cast<double>(i) / (n - 1) - 0.5) : 0.0) * span;
+      add(pos + arm * Vec3(std::cos(heading), std::sin(heading), 0.0), heading);
+    }
+    return cams;
+  }
+  const double step = std::min(c.robot_step * rng.uniform(0.6, 1.4), c.robot_max_travel / std::max(1, n - 1));
+  const double turn_rate = deg2rad(c.robot_turn_deg_per_step) * rng.uniform(-1.0, 1.0);
+  for (int i = 0; i < n; ++i) {
+    add(pos + Vec3(0, 0, 0.01 * c.robot_step * std::sin(2.3 * i)), yaw);  // a little bounce
+    const Vec3 next = pos + step * Vec3(std::cos(yaw), std::sin(yaw), 0.0);
+    if (clear(next)) {
+      pos = next;
+      yaw += turn_rate;
+    } else {
+      yaw += deg2rad(yaw > deg2rad(c.robot_heading_deg) ? -10.0 : 10.0);  // blocked: stop, turn back to the lane
+    }
+  }
+  return cams;
+}
+
 std::vector<Camera> plan_cameras(const SceneDef& scene, const SynthConfig& cfg, SynthTrajectory traj, Rng& rng) {
+  if (traj == SynthTrajectory::kDrive || traj == SynthTrajectory::kTurn) return plan_robot_path(scene, cfg, traj, rng);
   const CameraPlan& c = scene.cameras;
   const int n = cfg.num_views;
   std::vector<Camera> cams;
@@ -715,7 +992,8 @@ struct ViewLight {
 
 class Tracer {
  public:
-  Tracer(const SceneDef& scene, double texture_strength) : scene_(scene), strength_(texture_strength) {}
+  Tracer(const SceneDef& scene, double texture_strength, const PhotoTextureBank& photos)
+      : scene_(scene), strength_(texture_strength), photos_(photos) {}
 
   Hit trace(const Vec3& o, const Vec3& d, double t_min = 1e-9) const {
     Hit hit;
@@ -725,13 +1003,21 @@ class Tracer {
     return hit;
   }
 
-  Vec3 albedo_at(const Hit& h) const {
+  // `footprint`: a ray's pixel width on the surface (scene units), for the photographs' mip level.
+  Vec3 albedo_at(const Hit& h, double footprint = 0.0) const {
+    const Material& m = scene_.prims[h.prim].material;
     int ua, va;
     surface_axes(h.normal_local, &ua, &va);
-    return albedo(scene_.prims[h.prim].material, h.local, ua, va, strength_);
+    if (m.photo.texture < 0) return albedo(m, h.local, ua, va, strength_);
+    // The material's texture strength scales the photograph's contrast about its mean.
+    const double s = std::clamp(m.strength * strength_, 0.0, 2.0);
+    const Vec3 mean = photos_.mean_colour(m.photo.texture).cwiseProduct(m.photo.tint);
+    const Vec3 photo = mean + (photos_.sample(m.photo, h.local, h.normal_local, footprint) - mean) * s;
+    return albedo(m, h.local, ua, va, strength_, &photo);
   }
 
-  Vec3 radiance(const Vec3& o, const Vec3& d, const ViewLight& light) const {
+  // `pixel_angle`: the angle between neighbouring rays (radians).
+  Vec3 radiance(const Vec3& o, const Vec3& d, const ViewLight& light, double pixel_angle = 0.0) const {
     const Hit h = trace(o, d);
     if (h.prim < 0) return background(d);
     const Primitive& p = scene_.prims[h.prim];
@@ -740,7 +1026,9 @@ class Tracer {
     if (n.dot(d) > 0) n = -n;
     const Vec3 l = (light.position - x).normalized();
     const double diffuse = std::max(0.0, n.dot(l));
-    Vec3 col = albedo_at(h) * (light.ambient + (1.0 - light.ambient) * diffuse);
+    // Oblique surfaces stretch the pixel along one axis: the geometric mean of both stretches.
+    const double footprint = h.t * pixel_angle / std::sqrt(std::max(0.05, -n.dot(d)));
+    Vec3 col = albedo_at(h, footprint) * (light.ambient + (1.0 - light.ambient) * diffuse);
     if (light.specular && p.material.specular > 0 && diffuse > 0) {
       const Vec3 half = (l - d).normalized();
       col += Vec3::Constant(p.material.specular * std::pow(std::max(0.0, n.dot(half)), 40.0));
@@ -757,6 +1045,7 @@ class Tracer {
  private:
   const SceneDef& scene_;
   double strength_;
+  const PhotoTextureBank& photos_;
 };
 
 ViewLight view_light(const SceneDef& scene, const SynthConfig& cfg, int view, Rng& rng) {
@@ -786,6 +1075,7 @@ SynthView render_view(const Tracer& tracer, const Camera& cam, const ViewLight& 
   const Mat3 Rt = cam.R().transpose();
   const Vec3 eye = cam.center();
   const Vec3 axis = cam.viewing_direction();
+  const double pixel_angle = 1.0 / (cam.K(0, 0) * ss);
   at::parallel_for(0, H, 1, [&](int64_t y0, int64_t y1) {
     for (int64_t y = y0; y < y1; ++y) {
       for (int x = 0; x < W; ++x) {
@@ -794,7 +1084,7 @@ SynthView render_view(const Tracer& tracer, const Camera& cam, const ViewLight& 
           for (int sx = 0; sx < ss; ++sx) {
             const double u = x - 0.5 + (sx + 0.5) / ss, v = y - 0.5 + (sy + 0.5) / ss;
             const Vec3 d = (Rt * (Kinv * Vec3(u, v, 1.0))).normalized();
-            sum += tracer.radiance(eye, d, light);
+            sum += tracer.radiance(eye, d, light, pixel_angle);
           }
         }
         Vec3 col = sum / (ss * ss);
@@ -924,6 +1214,26 @@ PointCloud sample_gt_cloud(const SceneDef& scene, const Tracer& tracer, const st
   return cloud;
 }
 
+// Gives a share of the textured surfaces a photograph. Drawn from the material's own seed and the
+// scene seed, so primitives sharing a material (a table's top and legs) wear the same photograph
+// and the layout's random stream is untouched: without photographs a scene is the same as before.
+void assign_photo_textures(SceneDef* scene, const SynthConfig& cfg, const PhotoTextureBank& bank) {
+  if (bank.empty()) return;
+  for (Primitive& p : scene->prims) {
+    Material& m = p.material;
+    if (m.strength < 0.2) continue;  // textureless on purpose (plain walls, ceilings): stays so
+    Rng rng(m.seed ^ mix64(cfg.seed + 0x70686f746fULL));
+    if (rng.uniform() >= cfg.photo_texture_fraction) continue;
+    m.photo.texture = rng.integer(0, bank.size() - 1);
+    // About 3-10 noise features per 256 texels: small tiling patterns repeat, photographs spread.
+    m.photo.size = m.scale * rng.uniform(3.0, 10.0) * std::clamp(bank.width(m.photo.texture) / 256.0, 0.25, 2.0);
+    m.photo.angle = deg2rad(90.0 * rng.integer(0, 3) + rng.uniform(-10.0, 10.0));
+    m.photo.offset = Eigen::Vector2d(rng.uniform(), rng.uniform());
+    const double gain = rng.uniform(0.7, 1.15);
+    m.photo.tint = gain * Vec3(rng.uniform(0.85, 1.15), rng.uniform(0.85, 1.15), rng.uniform(0.85, 1.15));
+  }
+}
+
 void validate(const SynthConfig& c) {
   auto fail = [](const std::string& m) { throw std::invalid_argument("synthetic scene: " + m); };
   if (c.num_views < 1 || c.num_views > 10000) fail("num_views must be in [1, 10000], got " + std::to_string(c.num_views));
@@ -933,6 +1243,7 @@ void validate(const SynthConfig& c) {
   if (c.supersample < 1 || c.supersample > 8) fail("supersample must be in [1, 8], got " + std::to_string(c.supersample));
   if (!(c.texture_strength >= 0.0 && c.texture_strength <= 2.0)) fail("texture_strength must be in [0, 2]");
   if (c.gt_cloud_samples < 0) fail("gt_cloud_samples must not be negative");
+  if (!(c.photo_texture_fraction >= 0.0 && c.photo_texture_fraction <= 1.0)) fail("photo_texture_fraction must be in [0, 1]");
 }
 
 }  // namespace
@@ -945,11 +1256,14 @@ SynthScene render_synthetic_scene(const SynthConfig& config) {
     case SynthSceneType::kDtuLike: def = dtu_like_scene(layout_rng); break;
     case SynthSceneType::kRoom: def = room_scene(layout_rng); break;
     case SynthSceneType::kFacade: def = facade_scene(layout_rng); break;
+    case SynthSceneType::kCorridor: def = corridor_scene(layout_rng); break;
   }
   const SynthTrajectory traj = config.trajectory == SynthTrajectory::kDefault ? def.natural : config.trajectory;
   Rng camera_rng(config.seed * 31 + 7), light_rng(config.seed * 131 + 17);
   const std::vector<Camera> cams = plan_cameras(def, config, traj, camera_rng);
-  const Tracer tracer(def, config.texture_strength);
+  const PhotoTextureBank photos(config.photo_textures);
+  assign_photo_textures(&def, config, photos);
+  const Tracer tracer(def, config.texture_strength, photos);
 
   SynthScene scene;
   double dmin = kInf, dmax = 0.0;
@@ -1001,7 +1315,8 @@ SynthSceneType synth_scene_from_string(const std::string& name) {
   if (name == "dtu_like" || name == "dtu") return SynthSceneType::kDtuLike;
   if (name == "room") return SynthSceneType::kRoom;
   if (name == "facade") return SynthSceneType::kFacade;
-  throw std::invalid_argument("unknown synthetic scene '" + name + "' (expected dtu_like, room or facade)");
+  if (name == "corridor") return SynthSceneType::kCorridor;
+  throw std::invalid_argument("unknown synthetic scene '" + name + "' (expected dtu_like, room, facade or corridor)");
 }
 
 std::string to_string(SynthSceneType scene) {
@@ -1009,6 +1324,7 @@ std::string to_string(SynthSceneType scene) {
     case SynthSceneType::kDtuLike: return "dtu_like";
     case SynthSceneType::kRoom: return "room";
     case SynthSceneType::kFacade: return "facade";
+    case SynthSceneType::kCorridor: return "corridor";
   }
   return "?";
 }
@@ -1018,7 +1334,9 @@ SynthTrajectory synth_trajectory_from_string(const std::string& name) {
   if (name == "orbit") return SynthTrajectory::kOrbit;
   if (name == "forward") return SynthTrajectory::kForward;
   if (name == "random") return SynthTrajectory::kRandom;
-  throw std::invalid_argument("unknown trajectory '" + name + "' (expected default, orbit, forward or random)");
+  if (name == "drive") return SynthTrajectory::kDrive;
+  if (name == "turn") return SynthTrajectory::kTurn;
+  throw std::invalid_argument("unknown trajectory '" + name + "' (expected default, orbit, forward, random, drive or turn)");
 }
 
 std::string to_string(SynthTrajectory trajectory) {
@@ -1027,6 +1345,8 @@ std::string to_string(SynthTrajectory trajectory) {
     case SynthTrajectory::kOrbit: return "orbit";
     case SynthTrajectory::kForward: return "forward";
     case SynthTrajectory::kRandom: return "random";
+    case SynthTrajectory::kDrive: return "drive";
+    case SynthTrajectory::kTurn: return "turn";
   }
   return "?";
 }

@@ -13,7 +13,8 @@
 
 namespace umvs {
 
-void write_synthetic_scene(const std::string& dir, const SynthScene& scene, const SynthConfig& config) {
+void write_synthetic_scene(const std::string& dir, const SynthScene& scene, const SynthConfig& config,
+                           const std::vector<std::string>& texture_folders) {
   for (const char* sub : {"images", "cams", "depth_gt", "masks"}) make_directories(dir + "/" + sub);
   // The depth range as MVSNet reads it: DEPTH_MIN DEPTH_INTERVAL DEPTH_NUM DEPTH_MAX (128 planes).
   const int depth_num = 128;
@@ -51,7 +52,10 @@ void write_synthetic_scene(const std::string& dir, const SynthScene& scene, cons
         << "\nwidth " << config.width << "\nheight " << config.height << "\ntrajectory " << to_string(config.trajectory)
         << "\nlighting_change " << (config.lighting_change ? 1 : 0) << "\nspecular " << (config.specular ? 1 : 0)
         << "\ntexture_strength " << config.texture_strength << "\nsupersample " << config.supersample
-        << "\ngt_cloud_samples " << config.gt_cloud_samples << "\ndepth_min " << scene.depth_min << "\ndepth_max "
+        << "\nphoto_textures " << config.photo_textures.size() << "\nphoto_texture_fraction "
+        << config.photo_texture_fraction << "\ntexture_folders";
+    for (const auto& f : texture_folders) out << " " << f;
+    out << "\ngt_cloud_samples " << config.gt_cloud_samples << "\ndepth_min " << scene.depth_min << "\ndepth_max "
         << scene.depth_max << "\ngt_points " << scene.gt_cloud.size() << "\ngt_spacing " << scene.gt_cloud_spacing << "\n";
   });
 }

@@ -7,6 +7,7 @@
 #include "unsup_mvs/core/device.h"
 #include "unsup_mvs/core/synth.h"
 #include "unsup_mvs/io/synth_writer.h"
+#include "unsup_mvs/io/texture_bank.h"
 #include "unsup_mvs/tools/args.h"
 #include "unsup_mvs/tools/command.h"
 
@@ -17,17 +18,27 @@ UMVS_COMMAND(synth, "render a synthetic scene with exact ground truth (depth, gt
                   "  OUT/depth_gt/XXXXXXXX.pfm (z-depth, 0 = nothing hit) + .png preview, OUT/masks/XXXXXXXX.png,\n"
                   "  OUT/gt.ply (surface points seen by some view), OUT/scene.txt (settings).\n"
                   "Scenes: dtu_like (objects on a table, ~0.4-1 m), room (indoor robot path, 0.5-8 m),\n"
-                  "facade (street walk, 2-40 m). The same settings always give identical files.");
+                  "facade (street walk, 2-40 m), corridor (a robot driving down an office corridor, 0.3-30 m).\n"
+                  "Surfaces wear photographs from --textures (scripts/install_textures.sh installs the default\n"
+                  "collections; docs/synthetic.md) or procedural textures. The same settings and texture files\n"
+                  "always give identical files.");
   args.required("out", "output folder")
-      .option("scene", "room", "dtu_like | room | facade")
+      .option("scene", "room", "dtu_like | room | facade | corridor")
       .option("seed", "1", "layout, textures, lights and random trajectories")
       .option("views", "10", "number of views")
       .option("width", "320", "image width in pixels")
       .option("height", "256", "image height in pixels")
-      .option("trajectory", "default", "default | orbit | forward | random (default: orbit for dtu_like, forward otherwise)")
+      .option("trajectory", "default",
+              "default | orbit | forward | random | drive | turn (default: orbit for dtu_like, drive for corridor, "
+              "forward otherwise)")
       .option("lighting-change", "1", "1 = per-view gain/bias and a moving light, 0 = constant lighting")
       .flag("specular", "add specular highlights (only with --lighting-change 1)")
       .option("texture", "1.0", "texture contrast: 0 = textureless surfaces, 1 = default, up to 2")
+      .option("textures", "installed",
+              "photographic textures: folders DIR[,DIR] (searched recursively), 'installed' = the collections "
+              "scripts/install_textures.sh installs when present (procedural otherwise), 'none' = procedural only")
+      .option("photo-fraction", "0.75", "share of the textured surfaces that wear a photograph")
+      .option("texture-size", "512", "photographs are shrunk to at most this many pixels on their longest side")
       .option("supersample", "2", "anti-aliasing rays per pixel along each axis")
       .option("gt-samples", "300000", "area samples for gt.ply before visibility culling (0 = no gt.ply)")
       .option("threads", "0", "CPU threads (0 = all cores)");
@@ -50,12 +61,33 @@ UMVS_COMMAND(synth, "render a synthetic scene with exact ground truth (depth, gt
   cfg.texture_strength = args.real("texture");
   cfg.supersample = args.integer("supersample");
   cfg.gt_cloud_samples = args.integer("gt-samples");
+  cfg.photo_texture_fraction = args.real("photo-fraction");
+
+  std::vector<std::string> texture_folders;
+  const std::string textures = args.str("textures");
+  if (textures == "installed") {
+    texture_folders = umvs::installed_texture_folders();
+    if (texture_folders.empty()) {
+      std::cout << "no photographic texture collection installed (scripts/install_textures.sh installs them): "
+                   "using procedural textures\n";
+    }
+  } else if (textures != "none") {
+    texture_folders = args.all("textures");
+  }
+  if (!texture_folders.empty()) {
+    const umvs::TextureBank bank = umvs::load_texture_bank(texture_folders, args.integer("texture-size"));
+    cfg.photo_textures = bank.images;
+    std::cout << "photographic textures: " << bank.images.size() << " images from";
+    for (const auto& f : texture_folders) std::cout << " " << f;
+    std::cout << "\n";
+    for (const auto& s : bank.skipped) std::cout << "  skipped " << s << "\n";
+  }
 
   const auto t0 = std::chrono::steady_clock::now();
   const umvs::SynthScene scene = umvs::render_synthetic_scene(cfg);
   const double render_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   const std::string out = args.str("out");
-  umvs::write_synthetic_scene(out, scene, cfg);
+  umvs::write_synthetic_scene(out, scene, cfg, texture_folders);
   std::cout << "rendered " << scene.views.size() << " views of '" << umvs::to_string(cfg.scene) << "' (seed " << cfg.seed
             << ", " << cfg.width << "x" << cfg.height << ") in " << render_s << " s on " << torch::get_num_threads()
             << " threads\n"

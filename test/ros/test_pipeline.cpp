@@ -43,7 +43,7 @@ TEST(Pipeline, SyntheticBagToFusedCloud) {
   ros::NodeHandle nh;
   const std::string dir = umvs_test::temp_dir("pipeline");
   const std::string umvs = umvs_test::bin_dir() + "/umvs";
-  ASSERT_EQ(run(umvs + " synth --scene room --seed 1 --views 16 --width 320 --height 256 --gt-samples 0 --out " + dir +
+  ASSERT_EQ(run(umvs + " synth --scene room --seed 1 --views 16 --width 320 --height 256 --gt-samples 0 --textures none --out " + dir +
                 "/scene > " + dir + "/synth.log 2>&1"), 0);
   ASSERT_EQ(run(umvs + " bag --data " + dir + "/scene --out " + dir + "/log.bag --rate 1 --start 1000"), 0);
 

@@ -54,7 +54,7 @@ class TrainerTest : public ::testing::Test {
     }
     umvs_ = umvs_test::bin_dir() + "/umvs";
     ASSERT_EQ(run(umvs_ + " synth --out " + work_ + "/scene --scene room --seed 77 --views 16 --width 128 --height 96"
-                          " --texture 0.5 --specular --gt-samples 0 --threads 2 > /dev/null"), 0);
+                          " --texture 0.5 --textures none --specular --gt-samples 0 --threads 2 > /dev/null"), 0);
     ASSERT_EQ(run(umvs_ + " bag --data " + work_ + "/scene --out " + work_ + "/scene.bag --start 100 > /dev/null"), 0);
     fs::copy_file(default_model, work_ + "/served.pt", fs::copy_options::overwrite_existing);
     served_bytes_ = read_bytes(work_ + "/served.pt");
