@@ -56,7 +56,7 @@ if [[ "$RVIZ" == 1 ]]; then
   export DISPLAY=$display
 fi
 say "replaying at ${RATE}x through replay.launch with $CHECKPOINT (log: $WORK/launch.log)"
-roslaunch -p "${ROS_MASTER_URI##*:}" unsup_mvs replay.launch bag:="$WORK/scene.bag" checkpoint:="$CHECKPOINT" \
+roslaunch -p "${ROS_MASTER_URI##*:}" unsup_mvs replay.launch bag:="$WORK/scene.bag" checkpoint:="$CHECKPOINT" clouds_dir:="$WORK" \
   rate:="$RATE" rviz:=$([[ "$RVIZ" == 1 ]] && echo true || echo false) trainer:=false >"$WORK/launch.log" 2>&1 &
 pids+=($!)
 

@@ -16,15 +16,22 @@
 #include <stdexcept>
 
 #include "unsup_mvs/io/bag_messages.h"
+#include "unsup_mvs/io/file_safety.h"
 
 namespace umvs {
 
-BagWriter::BagWriter(const std::string& path, BagTopics topics)
-    : path_(path), tmp_path_(path + ".tmp-" + std::to_string(::getpid()) + ".bag"), topics_(std::move(topics)) {
+BagWriter::BagWriter(const std::string& path, BagTopics topics) : path_(path), topics_(std::move(topics)) {
+  // An exclusively created, unpredictable temporary name (never a link planted in advance),
+  // which rosbag then reopens by name.
+  int fd = -1;
+  tmp_path_ = create_temp_file_beside(path, &fd);
+  ::close(fd);
   bag_ = std::make_unique<rosbag::Bag>();
   try {
     bag_->open(tmp_path_, rosbag::bagmode::Write);
   } catch (const std::exception& e) {
+    std::error_code ec;
+    std::filesystem::remove(tmp_path_, ec);
     throw std::runtime_error("cannot write bag " + path + ": " + e.what());
   }
 }

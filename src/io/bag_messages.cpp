@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <stdexcept>
 
 namespace umvs {
@@ -13,6 +14,34 @@ namespace enc = sensor_msgs::image_encodings;
 
 bool is_supported_image_encoding(const std::string& e) {
   return e == enc::RGB8 || e == enc::BGR8 || e == enc::RGBA8 || e == enc::BGRA8 || e == enc::MONO8 || e == enc::MONO16;
+}
+
+void check_image_msg(const sensor_msgs::Image& msg, uint64_t max_pixels) {
+  const std::string size = std::to_string(msg.width) + "x" + std::to_string(msg.height);
+  if (msg.width == 0 || msg.height == 0) throw std::invalid_argument("image has zero size (" + size + ")");
+  const uint64_t pixels = static_cast<uint64_t>(msg.width) * msg.height;
+  if (pixels > max_pixels) {
+    throw std::invalid_argument("image is " + size + " = " + std::to_string(pixels) + " pixels, more than the limit of " +
+                                std::to_string(max_pixels));
+  }
+  uint64_t bytes_per_pixel = 0;
+  try {
+    bytes_per_pixel = static_cast<uint64_t>(enc::numChannels(msg.encoding)) * enc::bitDepth(msg.encoding) / 8;
+  } catch (const std::exception&) {
+    throw std::invalid_argument("unknown image encoding '" + msg.encoding + "'");
+  }
+  // 64-bit products: step * height of a hostile message can overflow 32 bits.
+  const uint64_t row = static_cast<uint64_t>(msg.width) * bytes_per_pixel;
+  if (msg.step < row) {
+    throw std::invalid_argument("image row step " + std::to_string(msg.step) + " is shorter than a " + size + " " +
+                                msg.encoding + " row (" + std::to_string(row) + " bytes)");
+  }
+  const uint64_t needed = static_cast<uint64_t>(msg.step) * msg.height;
+  if (msg.data.size() < needed) {
+    throw std::invalid_argument("truncated image: " + std::to_string(msg.data.size()) + " bytes of data, step " +
+                                std::to_string(msg.step) + " x height " + std::to_string(msg.height) + " needs " +
+                                std::to_string(needed) + " (" + size + " " + msg.encoding + ")");
+  }
 }
 
 namespace {
@@ -25,14 +54,9 @@ int channels_of(const std::string& e) {
 
 // The pixel rows of `msg` without padding: [H, W*bytes_per_pixel] uint8.
 torch::Tensor packed_rows(const sensor_msgs::Image& msg, int bytes_per_pixel) {
+  check_image_msg(msg, std::numeric_limits<uint64_t>::max());
   const int64_t H = msg.height, W = msg.width;
   const int64_t row = W * bytes_per_pixel;
-  if (H <= 0 || W <= 0) throw std::invalid_argument("image has zero size");
-  if (msg.step < row || msg.data.size() < static_cast<size_t>(msg.step) * (H - 1) + row) {
-    throw std::invalid_argument("image data is " + std::to_string(msg.data.size()) + " bytes with step " +
-                                std::to_string(msg.step) + ", too small for " + std::to_string(W) + "x" +
-                                std::to_string(H) + " " + msg.encoding);
-  }
   auto out = torch::empty({H, row}, torch::kUInt8);
   for (int64_t y = 0; y < H; ++y) std::memcpy(out[y].data_ptr(), msg.data.data() + y * msg.step, row);
   return out;

@@ -3,6 +3,7 @@
 #include <fcntl.h>
 #include <poll.h>
 #include <signal.h>
+#include <sys/prctl.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -30,6 +31,7 @@ void ChildProcess::start(const std::vector<std::string>& argv) {
   std::vector<char*> args;
   for (const auto& a : argv) args.push_back(const_cast<char*>(a.c_str()));
   args.push_back(nullptr);
+  const pid_t parent = ::getpid();
   const pid_t pid = ::fork();
   if (pid < 0) {
     ::close(fds[0]);
@@ -39,6 +41,10 @@ void ChildProcess::start(const std::vector<std::string>& argv) {
   if (pid == 0) {
     // Child: own process group (so a stop reaches its threads' children too), output to the pipe.
     ::setpgid(0, 0);
+    // Die with the parent: a SIGKILLed node must not leave its child writing into its folders.
+    // (getppid() check: the parent may have died before prctl took effect.)
+    ::prctl(PR_SET_PDEATHSIG, SIGKILL);
+    if (::getppid() != parent) ::_exit(127);
     ::dup2(fds[1], STDOUT_FILENO);
     ::dup2(fds[1], STDERR_FILENO);
     ::execv(args[0], args.data());

@@ -1,6 +1,7 @@
 // fusion: DepthEstimate stream -> core::StreamingFusion -> PointCloud2 (xyz + rgb in the world
 // frame). `cloud` carries the whole (bounded) map at ~publish_rate Hz, `cloud_increment` the
-// points each depth estimate adds, as soon as they exist. See docs/ros.md.
+// points each depth estimate adds, as soon as they exist. save_cloud writes only inside ~save_dir.
+// See docs/ros.md.
 #include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
 #include <ros/ros.h>
@@ -16,7 +17,9 @@
 #include "unsup_mvs/SaveCloud.h"
 #include "unsup_mvs/core/device.h"
 #include "unsup_mvs/core/fusion.h"
+#include "unsup_mvs/io/atomic_file.h"
 #include "unsup_mvs/io/bag_messages.h"
+#include "unsup_mvs/io/file_safety.h"
 #include "unsup_mvs/io/ply.h"
 #include "unsup_mvs/ros/nodelets.h"
 #include "unsup_mvs/ros/params.h"
@@ -64,8 +67,13 @@ class FusionNodelet : public nodelet::Nodelet {
     pnh.param("max_points", max_points, max_points);
     pnh.param("publish_rate", publish_rate, publish_rate);
     pnh.param<std::string>("device", device_name, "cpu");
+    pnh.param<std::string>("save_dir", save_dir_, "");
+    if (save_dir_.empty()) save_dir_ = ros_home() + "/unsup_mvs_clouds";
     pnh.param<std::string>("default_save_path", default_save_path_, "unsup_mvs_cloud.ply");
+    pnh.param("max_image_pixels", max_image_pixels_, kMaxDepthMapPixels);
     try {
+      if (max_image_pixels_ < 1) throw std::invalid_argument("max_image_pixels must be >= 1");
+      umvs::make_directories(save_dir_);
       if (window < 1) throw std::invalid_argument("window must be >= 1");
       if (max_points < 1) throw std::invalid_argument("max_points must be >= 1");
       if (!(publish_rate > 0)) throw std::invalid_argument("publish_rate must be > 0");
@@ -83,9 +91,10 @@ class FusionNodelet : public nodelet::Nodelet {
     timer_ = nh.createWallTimer(ros::WallDuration(1.0 / publish_rate), &FusionNodelet::onTimer, this);
     const auto& c = fusion_->config();
     NODELET_INFO("fusion: window %d, at most %d points, voxel %.3f m, a point needs %d agreeing views "
-                 "(%.1f px, %.1f%% depth, confidence >= %.2f), map published at %.1f Hz in '%s'",
+                 "(%.1f px, %.1f%% depth, confidence >= %.2f), map published at %.1f Hz in '%s', clouds saved "
+                 "into %s",
                  window, max_points, c.voxel_size, c.min_agreeing_views, c.max_reprojection_px,
-                 100 * c.max_relative_depth, c.min_confidence, publish_rate, world_frame_.c_str());
+                 100 * c.max_relative_depth, c.min_confidence, publish_rate, world_frame_.c_str(), save_dir_.c_str());
   }
 
   void onEstimate(const unsup_mvs::DepthEstimateConstPtr& msg) {
@@ -94,6 +103,10 @@ class FusionNodelet : public nodelet::Nodelet {
       if (!msg->world_frame.empty() && msg->world_frame != world_frame_) {
         throw std::invalid_argument("its pose is in '" + msg->world_frame + "', this node fuses in '" + world_frame_ + "'");
       }
+      // Bounded before anything is allocated for them (see docs/reliability.md, resource bounds).
+      umvs::check_image_msg(msg->depth, static_cast<uint64_t>(max_image_pixels_));
+      umvs::check_image_msg(msg->confidence, static_cast<uint64_t>(max_image_pixels_));
+      if (!msg->image.data.empty()) umvs::check_image_msg(msg->image, static_cast<uint64_t>(max_image_pixels_));
       view.id = msg->keyframe_id;
       view.depth = umvs::image_msg_to_float(msg->depth);
       view.confidence = umvs::image_msg_to_float(msg->confidence);
@@ -134,7 +147,17 @@ class FusionNodelet : public nodelet::Nodelet {
   }
 
   bool onSave(unsup_mvs::SaveCloud::Request& req, unsup_mvs::SaveCloud::Response& res) {
-    const std::string path = req.path.empty() ? default_save_path_ : req.path;
+    const std::string requested = req.path.empty() ? default_save_path_ : req.path;
+    std::string path;
+    try {
+      // Relative paths land in ~save_dir; nothing is written (or created) outside it.
+      path = umvs::resolve_inside(save_dir_, requested);
+    } catch (const std::exception& e) {
+      res.success = false;
+      res.message = std::string("refused: ") + e.what() + " (~save_dir); nothing written";
+      NODELET_ERROR("fusion: save_cloud %s", res.message.c_str());
+      return true;
+    }
     umvs::PointCloud copy;
     {
       std::lock_guard<std::mutex> lock(mutex_);
@@ -172,7 +195,11 @@ class FusionNodelet : public nodelet::Nodelet {
     return true;
   }
 
-  std::string world_frame_, default_save_path_;
+  std::string world_frame_, save_dir_, default_save_path_;
+  // Depth maps are a quarter of the network input; 2048 x 2048 keeps the window (about 21 bytes per
+  // pixel per estimate, docs/fusion.md) under 1 GB at the default window of 8.
+  static constexpr int kMaxDepthMapPixels = 2048 * 2048;
+  int max_image_pixels_ = kMaxDepthMapPixels;
   std::mutex mutex_;
   std::unique_ptr<umvs::StreamingFusion> fusion_;
   long estimates_ = 0;

@@ -5,12 +5,15 @@
 #include <image_transport/image_transport.h>
 #include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
+#include <ros/callback_queue.h>
 #include <ros/ros.h>
 #include <torch/torch.h>
 
 #include <atomic>
 #include <boost/make_shared.hpp>
+#include <chrono>
 #include <condition_variable>
+#include <future>
 #include <mutex>
 #include <thread>
 
@@ -21,15 +24,19 @@
 #include "unsup_mvs/core/device.h"
 #include "unsup_mvs/io/bag_messages.h"
 #include "unsup_mvs/io/checkpoint.h"
+#include "unsup_mvs/io/file_safety.h"
 #include "unsup_mvs/ros/nodelets.h"
+#include "unsup_mvs/ros/params.h"
 
 namespace umvs_ros {
 
 namespace {
 
 umvs::ViewInput view_from_msg(const sensor_msgs::Image& image, const sensor_msgs::CameraInfo& info,
-                              const geometry_msgs::Pose& pose, bool rectified, const std::string& name) {
+                              const geometry_msgs::Pose& pose, bool rectified, uint64_t max_pixels,
+                              const std::string& name) {
   try {
+    umvs::check_image_msg(image, max_pixels);
     umvs::ViewInput v;
     v.camera = umvs::camera_from_info(info, rectified);
     v.camera.T_cam_world = umvs::pose_to_matrix(pose).inverse();
@@ -46,6 +53,7 @@ umvs::ViewInput view_from_msg(const sensor_msgs::Image& image, const sensor_msgs
 class InferenceNodelet : public nodelet::Nodelet {
  public:
   ~InferenceNodelet() override {
+    reload_spinner_.reset();  // no reload callback runs past this point
     {
       std::lock_guard<std::mutex> lock(queue_mutex_);
       stop_ = true;
@@ -66,11 +74,26 @@ class InferenceNodelet : public nodelet::Nodelet {
     pnh.param("max_height", config_.max_height, 512);
     pnh.param("rectified", rectified_, false);
     pnh.param<std::string>("checkpoint", checkpoint_, "");
+    pnh.param("max_image_pixels", max_image_pixels_, kDefaultMaxImagePixels);
+    pnh.param("max_views", max_views_, 16);
+    pnh.param("max_planes", max_planes_, 256);
+    int max_checkpoint_mb = 256;
+    pnh.param("max_checkpoint_mb", max_checkpoint_mb, max_checkpoint_mb);
+    pnh.param("reload_timeout", reload_timeout_, 60.0);
     try {
       device_ = umvs::parse_device(device_name);
       if (config_.num_depth != 0 && (config_.num_depth < 8 || config_.num_depth % 8 != 0)) {
         throw std::invalid_argument("num_depth must be 0 (the checkpoint's) or a positive multiple of 8");
       }
+      if (max_image_pixels_ < 1 || max_views_ < 2 || max_planes_ < 8 || max_checkpoint_mb < 1 || !(reload_timeout_ > 0)) {
+        throw std::invalid_argument("need max_image_pixels >= 1, max_views >= 2, max_planes >= 8, max_checkpoint_mb >= 1 "
+                                    "and reload_timeout > 0");
+      }
+      if (config_.num_depth > max_planes_) {
+        throw std::invalid_argument("num_depth " + std::to_string(config_.num_depth) + " is more than max_planes " +
+                                    std::to_string(max_planes_));
+      }
+      max_checkpoint_bytes_ = static_cast<uint64_t>(max_checkpoint_mb) << 20;
     } catch (const std::exception& e) {
       NODELET_FATAL("inference: invalid parameters: %s", e.what());
       throw;
@@ -80,7 +103,7 @@ class InferenceNodelet : public nodelet::Nodelet {
     std::string message;
     if (checkpoint_.empty()) {
       NODELET_ERROR("inference: no ~checkpoint parameter; load one with the reload_model service");
-    } else if (!loadModel(checkpoint_, &message)) {
+    } else if (!installModel(checkpoint_, &message)) {
       NODELET_ERROR("inference: %s; load another one with the reload_model service", message.c_str());
     } else {
       NODELET_INFO("inference: %s", message.c_str());
@@ -96,7 +119,15 @@ class InferenceNodelet : public nodelet::Nodelet {
       confidence_pub_ = it_->advertise("confidence", 2, it_connect, it_connect);
     }
     diagnostics_pub_ = nh.advertise<diagnostic_msgs::DiagnosticArray>("/diagnostics", 5);
-    reload_srv_ = pnh.advertiseService("reload_model", &InferenceNodelet::onReload, this);
+    // reload_model has its own queue and thread: a slow or stuck load never holds up the keyframe
+    // callbacks (the standalone node spins one thread), so depth maps keep coming meanwhile.
+    ros::AdvertiseServiceOptions reload_options = ros::AdvertiseServiceOptions::create<unsup_mvs::ReloadModel>(
+        "reload_model",
+        [this](unsup_mvs::ReloadModel::Request& req, unsup_mvs::ReloadModel::Response& res) { return onReload(req, res); },
+        ros::VoidConstPtr(), &reload_queue_);
+    reload_srv_ = pnh.advertiseService(reload_options);
+    reload_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &reload_queue_);
+    reload_spinner_->start();
     worker_ = std::thread(&InferenceNodelet::work, this);
   }
 
@@ -148,21 +179,29 @@ class InferenceNodelet : public nodelet::Nodelet {
                                   std::to_string(set.source_images.size()) + ", " + std::to_string(set.source_infos.size()) +
                                   ", " + std::to_string(set.source_poses.size()));
     }
+    if (set.source_images.size() + 1 > static_cast<size_t>(max_views_)) {
+      throw std::invalid_argument(std::to_string(set.source_images.size() + 1) + " views, more than ~max_views " +
+                                  std::to_string(max_views_));
+    }
     if (!(set.depth_min > 0 && set.depth_max > set.depth_min)) {
       throw std::invalid_argument("impossible depth range " + std::to_string(set.depth_min) + " - " +
                                   std::to_string(set.depth_max));
     }
     std::vector<umvs::ViewInput> views;
-    views.push_back(view_from_msg(set.reference_image, set.reference_info, set.reference_pose, rectified_, "reference"));
+    const auto max_pixels = static_cast<uint64_t>(max_image_pixels_);
+    views.push_back(view_from_msg(set.reference_image, set.reference_info, set.reference_pose, rectified_, max_pixels,
+                                  "reference"));
     for (size_t i = 0; i < set.source_images.size(); ++i) {
       views.push_back(view_from_msg(set.source_images[i], set.source_infos[i], set.source_poses[i], rectified_,
-                                    "source " + std::to_string(set.source_ids.size() > i ? set.source_ids[i] : i)));
+                                    max_pixels, "source " + std::to_string(set.source_ids.size() > i ? set.source_ids[i] : i)));
     }
     umvs::DepthMap map;
+    std::string served;
     {
       std::lock_guard<std::mutex> lock(model_mutex_);
       if (!estimator_) throw std::runtime_error("no model loaded (set ~checkpoint or call reload_model)");
       map = estimator_->estimate(views, set.depth_min, set.depth_max);
+      served = checkpoint_;
     }
     std_msgs::Header header = set.reference_image.header;  // stamp and optical frame of the reference
     unsup_mvs::DepthEstimate out;
@@ -189,10 +228,10 @@ class InferenceNodelet : public nodelet::Nodelet {
                           "image; %ld done, %ld stale sets dropped, %ld failed",
                           set.reference_id, map.camera.width, map.camera.height, total, map.seconds, latency, processed_,
                           dropped_.load(), failed_.load());
-    publishDiagnostics(total, map.seconds, latency);
+    publishDiagnostics(total, map.seconds, latency, served);
   }
 
-  void publishDiagnostics(double total, double network, double latency) {
+  void publishDiagnostics(double total, double network, double latency, const std::string& served) {
     diagnostic_msgs::DiagnosticArray array;
     array.header.stamp = ros::Time::now();
     diagnostic_msgs::DiagnosticStatus status;
@@ -213,35 +252,61 @@ class InferenceNodelet : public nodelet::Nodelet {
     kv("last_network_s", std::to_string(network));
     kv("last_latency_s", std::to_string(latency));
     kv("mean_total_s", std::to_string(seconds_sum_ / std::max(1L, processed_)));
-    kv("checkpoint", checkpoint_);
+    kv("checkpoint", served);
     array.status.push_back(status);
     diagnostics_pub_.publish(array);
   }
 
-  // Loads `path`, checks it (architecture, a forward pass with finite output) and swaps it in.
-  // On failure the current model stays and *message says why.
-  bool loadModel(const std::string& path, std::string* message) {
+  // A checked model, ready to serve.
+  struct Candidate {
+    std::unique_ptr<umvs::DepthEstimator> estimator;
+    std::string description;
+  };
+
+  // Loads `path` and checks it: a regular file of at most max_bytes, loads, at most max_planes
+  // planes, a forward pass with finite output. Throws std::runtime_error saying why not. Touches
+  // no member: it may outlive the nodelet on an abandoned reload.
+  static Candidate loadCandidate(const std::string& path, const torch::Device& device,
+                                 const umvs::DepthEstimatorConfig& config, uint64_t max_bytes, int max_planes) {
+    umvs::regular_file_size(path, max_bytes);  // before reading: no FIFO, device or huge file
+    umvs::LoadedModel loaded = umvs::load_model(path, device);
+    Candidate c;
+    c.estimator = std::make_unique<umvs::DepthEstimator>(loaded.model, device, config);
+    if (c.estimator->num_depth() > max_planes) {
+      throw std::runtime_error("it runs with " + std::to_string(c.estimator->num_depth()) +
+                               " depth planes, more than ~max_planes " + std::to_string(max_planes) +
+                               " (set ~num_depth to override the checkpoint's)");
+    }
+    // Smoke test: a fronto-parallel camera pair of 64x64 with 8 planes.
+    umvs::Camera cam;
+    cam.width = cam.height = 64;
+    cam.K << 50, 0, 31.5, 0, 50, 31.5, 0, 0, 1;
+    umvs::Camera cam2 = cam;
+    cam2.T_cam_world(0, 3) = -0.1;
+    auto image = torch::randint(0, 255, {64, 64, 3}, torch::kUInt8);
+    umvs::DepthEstimator probe(loaded.model, device, umvs::DepthEstimatorConfig{0, 0, 8});
+    const umvs::DepthMap test = probe.estimate({{image, cam}, {image, cam2}}, 1.0, 2.0);
+    if (!torch::isfinite(test.depth).all().item<bool>() || !torch::isfinite(test.confidence).all().item<bool>()) {
+      throw std::runtime_error("a test forward pass gives non-finite depth or confidence");
+    }
+    c.description = "loaded " + path + " (" + loaded.format + ", " + loaded.model->config().to_string() + "), " +
+                    std::to_string(c.estimator->num_depth()) + " depth planes on " + device.str() + ", " +
+                    std::to_string(torch::get_num_threads()) + " threads";
+    return c;
+  }
+
+  void install(Candidate candidate, const std::string& path, std::string* message) {
+    std::lock_guard<std::mutex> lock(model_mutex_);
+    estimator_ = std::move(candidate.estimator);
+    checkpoint_ = path;
+    *message = candidate.description;
+  }
+
+  // Loads, checks and swaps in `path` on this thread (startup). On failure the current model
+  // stays and *message says why.
+  bool installModel(const std::string& path, std::string* message) {
     try {
-      umvs::LoadedModel loaded = umvs::load_model(path, device_);
-      auto candidate = std::make_unique<umvs::DepthEstimator>(loaded.model, device_, config_);
-      // Smoke test: a fronto-parallel camera pair of 64x64 with 8 planes.
-      umvs::Camera cam;
-      cam.width = cam.height = 64;
-      cam.K << 50, 0, 31.5, 0, 50, 31.5, 0, 0, 1;
-      umvs::Camera cam2 = cam;
-      cam2.T_cam_world(0, 3) = -0.1;
-      auto image = torch::randint(0, 255, {64, 64, 3}, torch::kUInt8);
-      umvs::DepthEstimator probe(loaded.model, device_, umvs::DepthEstimatorConfig{0, 0, 8});
-      const umvs::DepthMap test = probe.estimate({{image, cam}, {image, cam2}}, 1.0, 2.0);
-      if (!torch::isfinite(test.depth).all().item<bool>() || !torch::isfinite(test.confidence).all().item<bool>()) {
-        throw std::runtime_error("a test forward pass gives non-finite depth or confidence");
-      }
-      std::lock_guard<std::mutex> lock(model_mutex_);
-      estimator_ = std::move(candidate);
-      checkpoint_ = path;
-      *message = "loaded " + path + " (" + loaded.format + ", " + loaded.model->config().to_string() + "), " +
-                 std::to_string(estimator_->num_depth()) + " depth planes on " + device_.str() + ", " +
-                 std::to_string(torch::get_num_threads()) + " threads";
+      install(loadCandidate(path, device_, config_, max_checkpoint_bytes_, max_planes_), path, message);
       return true;
     } catch (const std::exception& e) {
       *message = "model " + path + " refused: " + e.what();
@@ -249,13 +314,46 @@ class InferenceNodelet : public nodelet::Nodelet {
     }
   }
 
+  // The load runs on its own thread; this callback waits at most ~reload_timeout for it. A load
+  // that takes longer is abandoned (its result is dropped; its thread finishes on its own) and
+  // no further reload starts until it has.
   bool onReload(unsup_mvs::ReloadModel::Request& req, unsup_mvs::ReloadModel::Response& res) {
-    res.success = loadModel(req.checkpoint, &res.message);
+    res.success = false;
+    const std::string path = req.checkpoint;
+    if (loads_running_->load() > 0) {
+      res.message = "model " + path + " refused: an earlier reload is still loading; try again later";
+    } else {
+      auto result = std::make_shared<std::promise<Candidate>>();
+      std::future<Candidate> done = result->get_future();
+      ++*loads_running_;
+      std::thread([result, path, device = device_, config = config_, max_bytes = max_checkpoint_bytes_,
+                   max_planes = max_planes_, running = loads_running_] {
+        try {
+          result->set_value(loadCandidate(path, device, config, max_bytes, max_planes));
+        } catch (...) {
+          result->set_exception(std::current_exception());
+        }
+        --*running;
+      }).detach();
+      if (done.wait_for(std::chrono::duration<double>(reload_timeout_)) != std::future_status::ready) {
+        res.message = "model " + path + " refused: loading it took longer than ~reload_timeout (" +
+                      std::to_string(reload_timeout_) + " s)";
+      } else {
+        try {
+          install(done.get(), path, &res.message);
+          res.success = true;
+        } catch (const std::exception& e) {
+          res.message = "model " + path + " refused: " + e.what();
+        }
+      }
+    }
     if (res.success) {
       NODELET_INFO("inference: %s", res.message.c_str());
     } else {
-      NODELET_ERROR("inference: %s; keeping %s", res.message.c_str(),
-                    estimator_ ? ("the model from " + checkpoint_).c_str() : "no model");
+      std::unique_lock<std::mutex> lock(model_mutex_);
+      const std::string kept = estimator_ ? "the model from " + checkpoint_ : "no model";
+      lock.unlock();
+      NODELET_ERROR("inference: %s; keeping %s", res.message.c_str(), kept.c_str());
     }
     return true;
   }
@@ -267,6 +365,14 @@ class InferenceNodelet : public nodelet::Nodelet {
   std::string checkpoint_;
   std::mutex model_mutex_;
   std::unique_ptr<umvs::DepthEstimator> estimator_;
+
+  // resource bounds (docs/reliability.md)
+  int max_image_pixels_ = kDefaultMaxImagePixels, max_views_ = 16, max_planes_ = 256;
+  uint64_t max_checkpoint_bytes_ = 256ull << 20;
+  double reload_timeout_ = 60.0;
+  ros::CallbackQueue reload_queue_;
+  std::unique_ptr<ros::AsyncSpinner> reload_spinner_;
+  std::shared_ptr<std::atomic<int>> loads_running_ = std::make_shared<std::atomic<int>>(0);
 
   std::mutex queue_mutex_;
   std::condition_variable queue_cv_;

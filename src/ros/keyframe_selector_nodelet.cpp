@@ -15,6 +15,7 @@
 #include <tf2_ros/buffer.h>
 #include <tf2_ros/transform_listener.h>
 
+#include <atomic>
 #include <boost/make_shared.hpp>
 #include <map>
 #include <mutex>
@@ -55,7 +56,9 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
     pnh.param("queue_size", queue_size, queue_size);
     bool approximate_sync = false;
     pnh.param("approximate_sync", approximate_sync, approximate_sync);
+    pnh.param("max_image_pixels", max_image_pixels_, kDefaultMaxImagePixels);
     try {
+      if (max_image_pixels_ < 1) throw std::invalid_argument("max_image_pixels must be >= 1");
       buffer_ = std::make_unique<umvs::KeyframeBuffer>(keyframe_config_from_ros(pnh));
       if (!(depth_min_ > 0 && depth_max_ > depth_min_)) {
         throw std::invalid_argument("need 0 < depth_min < depth_max, got " + std::to_string(depth_min_) + ", " +
@@ -84,6 +87,9 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
       exact_sync_ = std::make_unique<message_filters::Synchronizer<ExactPolicy>>(ExactPolicy(queue_size), image_sub_, info_sub_);
       exact_sync_->registerCallback(&KeyframeSelectorNodelet::onImage, this);
     }
+    // Beside the sync: notice images that have no CameraInfo to pair with (the sync stays silent).
+    image_sub_.registerCallback(&KeyframeSelectorNodelet::onAnyImage, this);
+    info_sub_.registerCallback(&KeyframeSelectorNodelet::onAnyInfo, this);
     const auto& c = buffer_->config();
     NODELET_INFO("keyframe_selector: %s + %s in '%s' (%s sync), keyframe after %.2f m / %.1f deg / pose distance %.2f, "
                  "buffer %d, %d neighbours, depth %.2f-%.2f m%s",
@@ -93,11 +99,34 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
                  depth_from_estimates_ ? " (then from depth estimates)" : "");
   }
 
+  void onAnyInfo(const sensor_msgs::CameraInfoConstPtr&) { last_info_wall_ = ros::WallTime::now().toSec(); }
+
+  void onAnyImage(const sensor_msgs::ImageConstPtr&) {
+    const double now = ros::WallTime::now().toSec(), last_info = last_info_wall_;
+    double first_image = first_image_wall_;
+    if (first_image == 0.0) first_image_wall_ = first_image = now;
+    // Quiet for the first seconds: at start the first image may simply come before its CameraInfo.
+    if (now - std::max(first_image, last_info) < kInfoSilenceSeconds) return;
+    NODELET_WARN_THROTTLE(kInfoSilenceSeconds, "keyframe_selector: images arrive on '%s' but %s on '%s'; nothing is "
+                          "processed until image and camera_info arrive together",
+                          image_sub_.getTopic().c_str(),
+                          last_info > 0 ? "no CameraInfo came for a while" : "no CameraInfo has come",
+                          info_sub_.getTopic().c_str());
+  }
+
   void onImage(const sensor_msgs::ImageConstPtr& image, const sensor_msgs::CameraInfoConstPtr& info) {
     std::lock_guard<std::mutex> lock(mutex_);
     if (!umvs::is_supported_image_encoding(image->encoding)) {
       NODELET_ERROR_THROTTLE(2.0, "keyframe_selector: image encoding '%s' is not supported (use rgb8, bgr8, rgba8, "
                              "bgra8, mono8 or mono16); frame skipped", image->encoding.c_str());
+      return;
+    }
+    try {
+      // Here, where images enter: a truncated image kept as a keyframe would spoil every later set.
+      umvs::check_image_msg(*image, static_cast<uint64_t>(max_image_pixels_));
+    } catch (const std::exception& e) {
+      NODELET_ERROR_THROTTLE(2.0, "keyframe_selector: bad image on '%s': %s; frame skipped", image_sub_.getTopic().c_str(),
+                             e.what());
       return;
     }
     umvs::Camera camera;
@@ -205,8 +234,12 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
     poses_pub_.publish(poses);
   }
 
+  static constexpr double kInfoSilenceSeconds = 3.0;  // images without CameraInfo for this long: warn
+
   std::string world_frame_;
   double tf_timeout_ = 0.1, depth_min_ = 0.3, depth_max_ = 10.0;
+  int max_image_pixels_ = kDefaultMaxImagePixels;
+  std::atomic<double> first_image_wall_{0.0}, last_info_wall_{0.0};  // wall seconds, 0 = none yet
   bool rectified_ = false, depth_from_estimates_ = true;
   std::mutex mutex_;
   std::unique_ptr<umvs::KeyframeBuffer> buffer_;

@@ -3,9 +3,17 @@
 #include <nodelet/loader.h>
 #include <ros/ros.h>
 
+#include <cstdlib>
+
 #include "unsup_mvs/ros/nodelets.h"
 
 namespace umvs_ros {
+
+std::string ros_home() {
+  if (const char* env = std::getenv("ROS_HOME"); env && *env) return env;
+  const char* home = std::getenv("HOME");
+  return std::string(home && *home ? home : "/tmp") + "/.ros";
+}
 
 umvs::KeyframeConfig keyframe_config_from_ros(const ros::NodeHandle& nh) {
   umvs::KeyframeConfig c;

@@ -8,24 +8,11 @@
 #include <sstream>
 
 #include "unsup_mvs/ReloadModel.h"
+#include "unsup_mvs/io/file_safety.h"
 
 namespace umvs_ros {
 
 namespace fs = std::filesystem;
-
-bool path_inside(const std::string& path, const std::string& dir) {
-  std::error_code ec;
-  const fs::path p = fs::weakly_canonical(fs::absolute(path), ec);
-  if (ec) return false;
-  const fs::path d = fs::weakly_canonical(fs::absolute(dir), ec);
-  if (ec) return false;
-  auto pi = p.begin();
-  for (auto di = d.begin(); di != d.end(); ++di, ++pi) {
-    if (di->empty()) continue;  // trailing slash
-    if (pi == p.end() || *pi != *di) return false;
-  }
-  return pi != p.end();  // strictly inside, not the folder itself
-}
 
 bool read_eval_photometric(const std::string& eval_csv, double* photometric) {
   std::ifstream in(eval_csv);
@@ -88,6 +75,11 @@ Trainer::Trainer(ros::NodeHandle nh, ros::NodeHandle pnh) : nh_(nh), pnh_(pnh) {
   std::error_code ec;
   fs::create_directories(output_dir_, ec);
   if (ec) ROS_ERROR("trainer: cannot create ~output_dir '%s': %s", output_dir_.c_str(), ec.message().c_str());
+  // A trainer killed mid-job left at most temporary files behind (its training process died with
+  // it, see ChildProcess): no writer is active in ~output_dir now, so they can go.
+  if (const int stale = umvs::remove_stale_temp_files(output_dir_)) {
+    ROS_WARN("trainer: removed %d temporary file(s) that interrupted writes left in %s", stale, output_dir_.c_str());
+  }
   if (::access(umvs_path_.c_str(), X_OK) != 0) {
     ROS_ERROR("trainer: ~umvs_path '%s' is not an executable; fine-tuning requests will fail", umvs_path_.c_str());
   }
@@ -134,8 +126,13 @@ bool Trainer::on_fine_tune(unsup_mvs::FineTune::Request& req, unsup_mvs::FineTun
   if (req.steps < 0) return refuse("steps must not be negative");
   const std::string job_id = make_job_id(output_dir_);
   const std::string output = req.output.empty() ? output_dir_ + "/" + job_id + ".pt" : req.output;
-  if (!path_inside(output, output_dir_)) return refuse("output '" + output + "' is outside the allowed folder " + output_dir_);
-  if (fs::is_directory(output)) return refuse("output '" + output + "' is a folder");
+  if (!umvs::path_inside(output, output_dir_)) {
+    return refuse("output '" + output + "' is outside the allowed folder " + output_dir_);
+  }
+  std::error_code ec;
+  if (fs::exists(fs::symlink_status(output, ec))) {
+    return refuse("output '" + output + "' already exists; a fine-tuned model is only written under a new name");
+  }
 
   job_id_ = job_id;
   job_dir_ = output_dir_ + "/" + job_id_;
@@ -174,6 +171,7 @@ bool Trainer::on_cancel(std_srvs::Trigger::Request&, std_srvs::Trigger::Response
   }
   child_.stop();
   phase_ = Phase::kIdle;
+  umvs::remove_stale_temp_files(job_dir_);
   res.success = true;
   res.message = "job " + job_id_ + " cancelled; the served model is unchanged";
   publish("cancelled", res.message);
@@ -252,6 +250,7 @@ void Trainer::on_timer(const ros::WallTimerEvent&) {
       s << "umvs train " << (phase_ == Phase::kTraining ? "" : "--eval-only ") << "exited with status " << status
         << " (" << last_.message << "); the served model is unchanged";
       phase_ = Phase::kIdle;
+      umvs::remove_stale_temp_files(job_dir_);  // what the killed or failed process was writing
       ROS_ERROR("trainer: job %s failed: %s", job_id_.c_str(), s.str().c_str());
       publish("failed", s.str());
       return;
@@ -286,10 +285,14 @@ void Trainer::finish_job() {
     ROS_WARN("trainer: job %s: %s: the served model stays", job_id_.c_str(), cmp.str().c_str());
     return;
   }
-  // Copy atomically: a reader never sees half a model, a failure leaves nothing behind.
-  const std::string tmp = output_path_ + ".tmp-" + std::to_string(::getpid());
-  fs::copy_file(job_dir_ + "/best.pt", tmp, fs::copy_options::overwrite_existing);
-  fs::rename(tmp, output_path_);
+  // Publish under the new name only (never replacing anything, not through a planted link), then
+  // let inference check it; a model inference refuses does not stay under the output name.
+  try {
+    umvs::copy_file_to_new_name(job_dir_ + "/best.pt", output_path_);
+  } catch (const std::exception& e) {
+    publish("failed", cmp.str() + "; the new model stays in " + job_dir_ + ": " + e.what());
+    return;
+  }
   unsup_mvs::ReloadModel srv;
   srv.request.checkpoint = output_path_;
   if (!ros::service::waitForService(reload_service_, ros::Duration(5.0)) || !ros::service::call(reload_service_, srv)) {
@@ -297,7 +300,9 @@ void Trainer::finish_job() {
     return;
   }
   if (!srv.response.success) {
-    publish("failed", cmp.str() + "; inference refused the new model: " + srv.response.message);
+    std::error_code ec;
+    fs::remove(output_path_, ec);
+    publish("failed", cmp.str() + "; inference refused the new model (kept in " + job_dir_ + "): " + srv.response.message);
     return;
   }
   served_checkpoint_ = output_path_;

@@ -65,6 +65,21 @@ class RosoutCapture {
   std::deque<std::string> lines_;
 };
 
+// Publishes `msg` every `period` s until the log shows `text`: a node throttles its errors of one
+// kind, so one bad message right after another may go unreported. Returns whether it showed.
+template <class Msg>
+bool publish_until_logged(ros::Publisher& pub, const Msg& msg, RosoutCapture& log, const std::string& text,
+                          double timeout, double period = 0.5) {
+  ros::WallTime next;
+  return wait_for([&] {
+    if (ros::WallTime::now() >= next) {
+      pub.publish(msg);
+      next = ros::WallTime::now() + ros::WallDuration(period);
+    }
+    return log.contains(text);
+  }, timeout);
+}
+
 // Folder of this executable (devel/lib/unsup_mvs), where the `umvs` tool is too.
 inline std::string bin_dir() { return std::filesystem::read_symlink("/proc/self/exe").parent_path().string(); }
 

@@ -54,7 +54,8 @@ class FusionTest : public ::testing::Test {
                                       increment_sub_.getNumPublishers() > 0; }, 10.0));
     unsup_mvs::ResetFusion r;
     ASSERT_TRUE(reset_.call(r));
-    dir_ = umvs_test::temp_dir("fusion");
+    ASSERT_TRUE(nh_.getParam("/fusion/save_dir", dir_));  // save_cloud writes only there
+    std::filesystem::create_directories(dir_);
   }
   void onCloud(const sensor_msgs::PointCloud2ConstPtr& m) { cloud_ = m; }
   void onIncrement(const sensor_msgs::PointCloud2ConstPtr& m) {
@@ -137,20 +138,17 @@ TEST_F(FusionTest, BadEstimatesAreLoggedAndSkipped) {
   umvs_test::RosoutCapture log(nh_);
   auto other_frame = make_estimate(50, 0.0);
   other_frame.world_frame = "map";
-  estimate_pub_.publish(other_frame);
-  EXPECT_TRUE(log.wait_for("this node fuses in 'world'", 10.0)) << log.all();
-
-  ros::WallDuration(2.2).sleep();  // errors are throttled to one per 2 s
+  EXPECT_TRUE(umvs_test::publish_until_logged(estimate_pub_, other_frame, log, "this node fuses in 'world'", 10.0))
+      << log.all();
+  // Errors are throttled to one per 2 s: each bad estimate is resent until its error shows.
   auto nan_pose = make_estimate(51, 0.0);
   nan_pose.pose.position.z = std::nan("");
-  estimate_pub_.publish(nan_pose);
-  EXPECT_TRUE(log.wait_for("pose has non-finite values", 10.0)) << log.all();
-
-  ros::WallDuration(2.2).sleep();
+  EXPECT_TRUE(umvs_test::publish_until_logged(estimate_pub_, nan_pose, log, "pose has non-finite values", 10.0))
+      << log.all();
   auto wrong_depth = make_estimate(52, 0.0);
   wrong_depth.depth.encoding = "mono8";
-  estimate_pub_.publish(wrong_depth);
-  EXPECT_TRUE(log.wait_for("expected a 32FC1 image, got 'mono8'", 10.0)) << log.all();
+  EXPECT_TRUE(umvs_test::publish_until_logged(estimate_pub_, wrong_depth, log, "expected a 32FC1 image, got 'mono8'", 10.0))
+      << log.all();
 
   // None of them entered the fusion window: three good estimates still make a cloud.
   for (uint32_t i = 0; i < 3; ++i) {

@@ -128,7 +128,7 @@ TEST(Pipeline, SyntheticBagToFusedCloud) {
 
   auto save = nh.serviceClient<unsup_mvs::SaveCloud>("/unsup_mvs/fusion/save_cloud");
   unsup_mvs::SaveCloud save_srv;
-  save_srv.request.path = dir + "/cloud.ply";
+  save_srv.request.path = "pipeline_cloud.ply";  // relative: inside fusion's ~save_dir
   ASSERT_TRUE(save.call(save_srv));
   double latency_sum = 0, network_sum = 0;
   for (const auto& [e, latency] : estimates) {
@@ -145,7 +145,9 @@ TEST(Pipeline, SyntheticBagToFusedCloud) {
                     "geometry is not checked (plumbing only)";
   }
   ASSERT_TRUE(save_srv.response.success) << save_srv.response.message;
-  const umvs::PointCloud cloud = umvs::read_ply(save_srv.request.path);
+  std::string clouds_dir;
+  ASSERT_TRUE(nh.getParam("/unsup_mvs/fusion/save_dir", clouds_dir));
+  const umvs::PointCloud cloud = umvs::read_ply(clouds_dir + "/pipeline_cloud.ply");
   ASSERT_EQ(cloud.size(), save_srv.response.num_points);
   ASSERT_GT(cloud.size(), 1000u);
 

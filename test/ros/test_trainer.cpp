@@ -5,6 +5,7 @@
 // specular highlights) reloads inference with a model whose depth error against ground truth is
 // lower than the served one's.
 #include <diagnostic_msgs/DiagnosticArray.h>
+#include <sensor_msgs/PointCloud2.h>
 #include <std_srvs/Trigger.h>
 #include <torch/torch.h>
 
@@ -69,6 +70,7 @@ class TrainerTest : public ::testing::Test {
     ASSERT_TRUE(reload_.waitForExistence(ros::Duration(30.0))) << "inference did not come up";
     ASSERT_TRUE(save_.waitForExistence(ros::Duration(30.0))) << "fusion did not come up";
     progress_sub_ = nh_.subscribe("/trainer/progress", 100, &TrainerTest::onProgress, this);
+    cloud_sub_ = nh_.subscribe("/cloud", 5, &TrainerTest::onCloud, this);
     estimate_sub_ = nh_.subscribe("/depth_estimate", 10, &TrainerTest::onEstimate, this);
     diagnostics_sub_ = nh_.subscribe("/diagnostics", 10, &TrainerTest::onDiagnostics, this);
     estimate_pub_ = nh_.advertise<unsup_mvs::DepthEstimate>("/depth_estimate", 10);
@@ -78,6 +80,7 @@ class TrainerTest : public ::testing::Test {
   }
 
   void onProgress(const unsup_mvs::TrainingProgressConstPtr& m) { progress_.push_back(m); }
+  void onCloud(const sensor_msgs::PointCloud2ConstPtr& m) { cloud_ = m; }
   void onEstimate(const unsup_mvs::DepthEstimateConstPtr& m) {
     if (m->header.frame_id != "test") estimates_.push_back(m);  // not our own fusion input
   }
@@ -191,7 +194,8 @@ class TrainerTest : public ::testing::Test {
   static std::string work_, umvs_, served_bytes_;
   ros::NodeHandle nh_;
   ros::ServiceClient fine_tune_, status_, reload_, save_;
-  ros::Subscriber progress_sub_, estimate_sub_, diagnostics_sub_;
+  ros::Subscriber progress_sub_, estimate_sub_, diagnostics_sub_, cloud_sub_;
+  sensor_msgs::PointCloud2ConstPtr cloud_;  // fusion's latest map
   ros::Publisher estimate_pub_, keyframes_pub_;
   std::vector<unsup_mvs::TrainingProgressConstPtr> progress_;
   std::vector<unsup_mvs::DepthEstimateConstPtr> estimates_;
@@ -223,10 +227,25 @@ TEST_F(TrainerTest, KillingTheTrainingProcessLeavesInferenceAndFusionUntouched) 
   unsup_mvs::ReloadModel reload;
   reload.request.checkpoint = work_ + "/served.pt";
   ASSERT_TRUE(reload_.call(reload) && reload.response.success) << reload.response.message;
-  for (uint32_t i = 0; i < 3; ++i) estimate_pub_.publish(plane_estimate(i, 0.1 * i));
-  ros::WallDuration(1.0).sleep();
+  // Three estimates of a plane, resent until fusion's map carries the stamp of the last one sent:
+  // estimates are fused in order, so then all of them are in and the map no longer changes. (A
+  // fixed wait here failed on a busy machine: the map was still empty, or fusion not yet connected.)
+  ros::Time last_sent;
+  ros::WallTime next;
+  ASSERT_TRUE(wait_for([&] {
+    if (ros::WallTime::now() >= next) {
+      for (uint32_t i = 0; i < 3; ++i) {
+        const auto e = plane_estimate(i, 0.1 * i);
+        estimate_pub_.publish(e);
+        last_sent = e.header.stamp;
+      }
+      next = ros::WallTime::now() + ros::WallDuration(5.0);
+    }
+    return cloud_ && cloud_->header.stamp == last_sent;
+  }, 60.0)) << "fusion did not fuse the plane";
   const size_t points = save_cloud(work_ + "/before.ply");
   ASSERT_GT(points, 1000u);
+  EXPECT_EQ(points, cloud_->width * cloud_->height);
 
   const auto r = fine_tune({work_ + "/scene.bag"}, 100000);
   ASSERT_TRUE(r.accepted) << r.message;

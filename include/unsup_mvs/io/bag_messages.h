@@ -16,6 +16,12 @@ namespace umvs {
 // Encodings the pipeline accepts for camera images.
 bool is_supported_image_encoding(const std::string& encoding);  // rgb8, bgr8, rgba8, bgra8, mono8, mono16
 
+// Checks that the message's data holds what its header claims: a known encoding, a non-zero size
+// of at most `max_pixels`, a row step of at least a row, and step * height <= data.size() (a
+// truncated image is refused where it enters, not when it poisons later depth maps). Throws
+// std::invalid_argument naming the problem.
+void check_image_msg(const sensor_msgs::Image& msg, uint64_t max_pixels);
+
 // sensor_msgs/Image -> uint8 [H,W,3] RGB (grey replicated, mono16 scaled to 8 bits, alpha dropped;
 // row padding and big-endian mono16 handled). Throws std::invalid_argument naming the encoding or
 // the size mismatch.

@@ -19,7 +19,9 @@ class ChildProcess {
   ChildProcess& operator=(const ChildProcess&) = delete;
 
   // argv[0] must be an absolute path to an executable. Throws std::runtime_error naming the
-  // program when it cannot be started. stdout and stderr are merged into one stream.
+  // program when it cannot be started. stdout and stderr are merged into one stream. The child
+  // is SIGKILLed when the thread that started it ends (PR_SET_PDEATHSIG), so it never outlives a
+  // killed parent: start it from a thread that lives as long as the process (e.g. ROS callbacks).
   void start(const std::vector<std::string>& argv);
 
   // Reads what the child printed since the last call and hands every complete line to `on_line`

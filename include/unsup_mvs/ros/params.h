@@ -5,10 +5,19 @@
 
 #include <ros/node_handle.h>
 
+#include <string>
+
 #include "unsup_mvs/core/fusion.h"
 #include "unsup_mvs/core/keyframes.h"
 
 namespace umvs_ros {
+
+// Largest image (width * height) a node accepts in a message by default (~max_image_pixels):
+// 4096 x 4096, 48 MiB as rgb8. See docs/reliability.md, "Resource bounds (nodes)".
+constexpr int kDefaultMaxImagePixels = 4096 * 4096;
+
+// $ROS_HOME, else $HOME/.ros (else /tmp/.ros): where nodes keep their files by default.
+std::string ros_home();
 
 umvs::KeyframeConfig keyframe_config_from_ros(const ros::NodeHandle& nh);
 umvs::FusionConfig fusion_config_from_ros(const ros::NodeHandle& nh);

@@ -1,12 +1,14 @@
 // The trainer node: fine-tunes the network on recorded bags without ground truth, on request.
 //
 // FineTune (~fine_tune) validates the request (bags exist and are readable, output inside
-// ~output_dir, one job at a time) and runs `umvs train --bag ...` as a child process (an argument
+// ~output_dir and not an existing name, one job at a time) and runs `umvs train --bag ...` as a child process (an argument
 // list, never a shell). While it runs, ~progress (TrainingProgress) reports step, loss terms and
 // ETA from the job's train_log.csv. When training ends, the new and the served model are both
 // evaluated on the same held-out keyframes (`umvs train --eval-only`); only if the new model's
-// photometric loss is lower is it copied to the output path and the inference nodelet's
-// reload_model service called. A crash or kill of the child touches neither inference nor fusion.
+// photometric loss is lower is it copied to the (new) output path and the inference nodelet's
+// reload_model service called; if inference refuses it, the copy is removed again. A crash or kill
+// of the child touches neither inference nor fusion; a kill of the node kills the child, and a
+// restarted node removes the temporary files left in ~output_dir.
 #pragma once
 
 #include <ros/ros.h>
@@ -64,8 +66,5 @@ class Trainer {
 // Reads the photometric loss from an eval.csv written by `umvs train --eval-only ... --out DIR`.
 // Returns false when the file is missing or malformed.
 bool read_eval_photometric(const std::string& eval_csv, double* photometric);
-
-// True when `path` (which need not exist) lies inside `dir` after resolving '..' and links.
-bool path_inside(const std::string& path, const std::string& dir);
 
 }  // namespace umvs_ros
