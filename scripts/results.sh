@@ -17,6 +17,7 @@
 #   environment: UMVS, THREADS (2), STEPS (fine-tuning steps, 150), MODELS ("new old mvsnet"),
 #                ADAPT ("none photometric self"), ADAPT_MODELS ("new mvsnet") and ADAPT_TARGETS
 #                ("livingroom templeRing"): which models are adapted on which targets (others: "-"),
+#                EVAL_TUPLES (0 = all): rendered reference views scored (evenly spread),
 #                OLD_REV (default model before issue 13: 6fd5413)
 set -euo pipefail
 
@@ -32,6 +33,7 @@ ADAPT="${ADAPT:-none photometric self}"
 OLD_REV="${OLD_REV:-6fd5413}"
 ADAPT_MODELS="${ADAPT_MODELS:-new mvsnet}"
 ADAPT_TARGETS="${ADAPT_TARGETS:-livingroom templeRing}"
+EVAL_TUPLES="${EVAL_TUPLES:-0}"
 [ -x "$UMVS" ] || { echo "umvs not found at $UMVS (set UMVS=/path/to/umvs)" >&2; exit 1; }
 for d in mvsnet_parity livingroom templeRing; do
   [ -d "$SHARED/$d" ] || { echo "needs $SHARED/$d" >&2; exit 1; }
@@ -66,7 +68,7 @@ TEMPLE_BBOX=-0.023121,-0.038009,-0.091940,0.078626,0.121636,-0.017395
 # Per target: evaluation set-up, and fine-tuning set-up (the default model's training size).
 eval_args() {
   case "$1" in
-    rendered) echo "--data $rendered --width 320 --height 256 --num-depth 64 --views-loss 4 --top-k 3" ;;
+    rendered) echo "--data $rendered --width 320 --height 256 --num-depth 64 --views-loss 4 --top-k 3 --val-tuples $EVAL_TUPLES" ;;
     livingroom) echo "--data $WORK/data/livingroom --width 640 --height 480 --num-depth 128 --views-loss 3 --top-k 2" ;;
   esac
 }

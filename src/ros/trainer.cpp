@@ -14,24 +14,24 @@ namespace umvs_ros {
 
 namespace fs = std::filesystem;
 
-bool read_eval_photometric(const std::string& eval_csv, double* photometric) {
+bool read_eval_scores(const std::string& eval_csv, EvalScores* scores) {
   std::ifstream in(eval_csv);
   std::string header, row;
   if (!std::getline(in, header) || !std::getline(in, row)) return false;
   std::vector<std::string> names, values;
   for (std::stringstream h(header); std::getline(h, names.emplace_back(), ',');) {}
   for (std::stringstream r(row); std::getline(r, values.emplace_back(), ',');) {}
+  bool photometric = false, consistent = false;
   for (size_t i = 0; i < names.size() && i < values.size(); ++i) {
-    if (names[i] == "photometric" && !values[i].empty()) {
-      try {
-        *photometric = std::stod(values[i]);
-        return true;
-      } catch (const std::exception&) {
-        return false;
-      }
+    if (values[i].empty() || (names[i] != "photometric" && names[i] != "consistent")) continue;
+    try {
+      (names[i] == "photometric" ? scores->photometric : scores->consistent) = std::stod(values[i]);
+      (names[i] == "photometric" ? photometric : consistent) = true;
+    } catch (const std::exception&) {
+      return false;
     }
   }
-  return false;
+  return photometric && consistent;
 }
 
 namespace {
@@ -260,7 +260,7 @@ void Trainer::on_timer(const ros::WallTimerEvent&) {
       publish("evaluating", "training done; comparing with the served model on held-out keyframes");
       start_evaluation(job_dir_ + "/best.pt", job_dir_ + "/eval_new", Phase::kEvaluatingNew);
     } else if (phase_ == Phase::kEvaluatingNew) {
-      if (!read_eval_photometric(job_dir_ + "/eval_new/eval.csv", &new_loss_)) throw std::runtime_error("no evaluation of the new model");
+      if (!read_eval_scores(job_dir_ + "/eval_new/eval.csv", &new_scores_)) throw std::runtime_error("no evaluation of the new model");
       start_evaluation(served_checkpoint_, job_dir_ + "/eval_served", Phase::kEvaluatingServed);
     } else {
       finish_job();
@@ -273,14 +273,18 @@ void Trainer::on_timer(const ros::WallTimerEvent&) {
 
 void Trainer::finish_job() {
   phase_ = Phase::kIdle;
-  double served_loss = 0.0;
-  if (!read_eval_photometric(job_dir_ + "/eval_served/eval.csv", &served_loss)) {
+  EvalScores served;
+  if (!read_eval_scores(job_dir_ + "/eval_served/eval.csv", &served)) {
     throw std::runtime_error("no evaluation of the served model");
   }
   std::ostringstream cmp;
   cmp.precision(5);
-  cmp << "held-out photometric loss: new " << new_loss_ << ", served " << served_loss;
-  if (!(new_loss_ < served_loss)) {
+  cmp << "held-out photometric loss: new " << new_scores_.photometric << ", served " << served.photometric
+      << "; multi-view consistent depth: new " << 100.0 * new_scores_.consistent << "%, served "
+      << 100.0 * served.consistent << "%";
+  // A lower photometric loss alone does not mean better depth (it can fall while depth gets
+  // worse): the new model must also have more depth that other views confirm.
+  if (!(new_scores_.photometric < served.photometric && new_scores_.consistent > served.consistent)) {
     publish("kept", cmp.str() + ": the served model stays");
     ROS_WARN("trainer: job %s: %s: the served model stays", job_id_.c_str(), cmp.str().c_str());
     return;

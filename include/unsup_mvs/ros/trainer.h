@@ -24,6 +24,12 @@
 
 namespace umvs_ros {
 
+// What the trainer compares between a fine-tuned and the served model (label-free).
+struct EvalScores {
+  double photometric = 0.0;  // held-out photometric loss (lower is better)
+  double consistent = 0.0;   // share of held-out depth confirmed by other views (higher is better)
+};
+
 class Trainer {
  public:
   Trainer(ros::NodeHandle nh, ros::NodeHandle pnh);
@@ -59,12 +65,12 @@ class Trainer {
   std::string job_id_, job_dir_, output_path_, init_checkpoint_;
   std::vector<std::string> bags_;
   unsup_mvs::TrainingProgress last_;
-  double new_loss_ = 0.0;
+  EvalScores new_scores_;
   ros::WallTime started_;
 };
 
-// Reads the photometric loss from an eval.csv written by `umvs train --eval-only ... --out DIR`.
-// Returns false when the file is missing or malformed.
-bool read_eval_photometric(const std::string& eval_csv, double* photometric);
+// Reads the held-out photometric loss and multi-view consistency from an eval.csv written by
+// `umvs train --eval-only ... --out DIR`. Returns false when the file is missing or malformed.
+bool read_eval_scores(const std::string& eval_csv, EvalScores* scores);
 
 }  // namespace umvs_ros
