@@ -120,7 +120,7 @@ cell() {
         --threads "$THREADS" >/dev/null 2>&1
       "$UMVS" fuse --depth "$out" --out "$out.ply" --threads "$THREADS" --bbox "$TEMPLE_BBOX" >"$out.fuse.txt" 2>&1
     fi
-    awk '/^fused/ { n = $6 } /inside the bounding box/ { gsub(/[(%)]/, "", $NF); s = $NF }
+    awk '/^fused/ { n = $5 } /inside the bounding box/ { gsub(/[(%)]/, "", $NF); s = $NF }
          END { printf "%d / %.1f", n, s }' "$out.fuse.txt"
   else
     local out="$WORK/eval/$name"

@@ -307,7 +307,11 @@ TEST(SelfTraining, PseudoLabelsAreTheAccuratePixels) {
     ASSERT_FALSE(tuples.back().depth_gt.defined()) << "read_ground_truth = false still read depth_gt/";
   }
   ConsistencyScore score;
-  const auto labelled = pseudo_labelled_tuples(model, tuples, 32, FusionConfig(), torch::kCPU, &score);
+  FusionConfig rule;  // umvs train's self-training defaults
+  rule.min_confidence = 0.5;
+  rule.max_relative_depth = 0.03;
+  rule.min_agreeing_views = 2;
+  const auto labelled = pseudo_labelled_tuples(model, tuples, 32, rule, torch::kCPU, &score);
   ASSERT_EQ(labelled.size(), tuples.size());
   EXPECT_GT(score.confirmed_fraction, 0.02);
   EXPECT_LT(score.confirmed_fraction, 0.95);

@@ -289,6 +289,9 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
               "where several views agree (fusion thresholds) and train on those labels at --supervised-share, the "
               "others photometrically; no ground truth is read (0 = off)")
       .option("pseudo-label-tuples", "0", "self-training: label at most this many training tuples (0 = all)")
+      .option("label-min-confidence", "0.5", "self-training: confidence a labelled pixel needs")
+      .option("label-max-relative-depth", "0.03", "self-training: relative depth agreement with the other views")
+      .option("label-min-views", "2", "self-training: other views that must agree")
       .option("min-gain", "1", "exposure augmentation: lowest gain applied to a whole tuple (log-uniform draw)")
       .option("max-gain", "1", "exposure augmentation: highest gain (clipped at white)")
       .option("input-normalization", "per_image_channel",
@@ -569,9 +572,16 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
   // A self-training round starts at every multiple of --self-training-every: its labels come from
   // the model at that step (round_start.pt keeps it, so that a resumed run labels exactly alike).
   const std::string round_path = out + "/round_start.pt";
+  // Fusion's rule, loosened for the training size's few planes (32 planes over 0.5-8 m are ~9 %
+  // apart in depth, so 1 % agreement would keep almost nothing).
+  umvs::FusionConfig label_rule;
+  label_rule.min_confidence = args.real("label-min-confidence");
+  label_rule.max_relative_depth = args.real("label-max-relative-depth");
+  label_rule.min_agreeing_views = args.integer("label-min-views");
+  label_rule.validate();
   auto label_round = [&](umvs::MvsNet& labeller) {
     umvs::ConsistencyScore score;
-    pseudo->replace(umvs::pseudo_labelled_tuples(labeller, to_label, tcfg.num_depth, umvs::FusionConfig(), device,
+    pseudo->replace(umvs::pseudo_labelled_tuples(labeller, to_label, tcfg.num_depth, label_rule, device,
                                                  &score));
     std::cerr << "\nself-training round at step " << step << ": " << 100.0 * score.confirmed_fraction
               << "% of the reference pixels of " << score.tuples << " tuples confirmed by other views\n";
