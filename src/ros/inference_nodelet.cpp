@@ -328,12 +328,18 @@ class InferenceNodelet : public nodelet::Nodelet {
       ++*loads_running_;
       std::thread([result, path, device = device_, config = config_, max_bytes = max_checkpoint_bytes_,
                    max_planes = max_planes_, running = loads_running_] {
+        Candidate candidate;
+        std::exception_ptr error;
         try {
-          result->set_value(loadCandidate(path, device, config, max_bytes, max_planes));
+          candidate = loadCandidate(path, device, config, max_bytes, max_planes);
         } catch (...) {
-          result->set_exception(std::current_exception());
+          error = std::current_exception();
         }
+        // Done before the answer: a reload requested right after this one is answered must not
+        // find it still running.
         --*running;
+        if (error) result->set_exception(error);
+        else result->set_value(std::move(candidate));
       }).detach();
       if (done.wait_for(std::chrono::duration<double>(reload_timeout_)) != std::future_status::ready) {
         res.message = "model " + path + " refused: loading it took longer than ~reload_timeout (" +

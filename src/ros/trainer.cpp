@@ -284,7 +284,10 @@ void Trainer::finish_job() {
       << 100.0 * served.consistent << "%";
   // A lower photometric loss alone does not mean better depth (it can fall while depth gets
   // worse): the new model must also have more depth that other views confirm.
-  if (!(new_scores_.photometric < served.photometric && new_scores_.consistent > served.consistent)) {
+  // Too little confirmed depth (< 1 % of the held-out pixels) is no evidence either way: keep.
+  constexpr double kMinConsistentShare = 0.01;
+  if (!(new_scores_.photometric < served.photometric && new_scores_.consistent > served.consistent &&
+        new_scores_.consistent >= kMinConsistentShare)) {
     publish("kept", cmp.str() + ": the served model stays");
     ROS_WARN("trainer: job %s: %s: the served model stays", job_id_.c_str(), cmp.str().c_str());
     return;

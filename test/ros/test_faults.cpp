@@ -53,7 +53,8 @@ bool process_gone(pid_t pid) {
 
 // Stand-in for `umvs train`: a training job writes an unloadable best.pt at once (or, with
 // --steps 99999, records its pid and sleeps); --eval-only rates the job's best.pt better than any
-// other checkpoint, so the trainer always tries to publish the new model.
+// other checkpoint (lower photometric loss, higher multi-view consistency), so the trainer always
+// tries to publish the new model.
 constexpr char kFakeUmvs[] = R"(#!/bin/sh
 out=""; eval_only=""; steps=""
 while [ $# -gt 0 ]; do
@@ -62,8 +63,8 @@ while [ $# -gt 0 ]; do
 done
 mkdir -p "$out"
 if [ -n "$eval_only" ]; then
-  case "$eval_only" in */best.pt) loss=0.1;; *) loss=0.2;; esac
-  printf 'photometric\n%s\n' "$loss" > "$out/eval.csv"
+  case "$eval_only" in */best.pt) scores=0.1,0.9;; *) scores=0.2,0.5;; esac
+  printf 'photometric,consistent\n%s\n' "$scores" > "$out/eval.csv"
   exit 0
 fi
 echo $$ > "$out/child.pid"

@@ -293,7 +293,10 @@ TEST_F(TrainerTest, CancelStopsTheJobAndTheStatusSaysSo) {
   EXPECT_FALSE(cancel.response.success) << "nothing left to cancel";
 }
 
-TEST_F(TrainerTest, FineTuningReloadsABetterModel) {
+TEST_F(TrainerTest, FineTuningNeverServesAWorseModel) {
+  // The node judges without labels (held-out photometric loss and multi-view consistency); the
+  // scene's ground truth checks the verdict: a reloaded model has lower depth error, a kept one
+  // leaves the served model and inference untouched.
   const double before = depth_error(work_ + "/served.pt", "served");
   ASSERT_TRUE(std::isfinite(before));
 
@@ -302,24 +305,29 @@ TEST_F(TrainerTest, FineTuningReloadsABetterModel) {
   EXPECT_FALSE(r.job_id.empty());
   const auto last = wait_final(r.job_id, 600.0);
   ASSERT_TRUE(last) << "the job did not finish; status: " << status();
-  ASSERT_EQ(last->state, "reloaded") << last->message;
+  ASSERT_TRUE(last->state == "reloaded" || last->state == "kept") << last->state << ": " << last->message;
   EXPECT_GT(last->total_steps, 0);
-  const std::string model = work_ + "/models/" + r.job_id + ".pt";
-  ASSERT_TRUE(fs::exists(model));
-  EXPECT_NE(status().find("serving " + model), std::string::npos) << status();
   EXPECT_EQ(read_bytes(work_ + "/served.pt"), served_bytes_) << "the previous model must not be overwritten";
+  const std::string model = work_ + "/models/" + r.job_id + ".pt";
+  const std::string fine_tuned = last->state == "reloaded" ? model : work_ + "/models/" + r.job_id + "/best.pt";
 
-  // Inference now runs the new model.
+  // Inference serves the verdict's model.
   estimates_.clear();
   inference_checkpoint_.clear();
   keyframes_pub_.publish(scene_set(2));
   ASSERT_TRUE(wait_for([&] { return !estimates_.empty() && !inference_checkpoint_.empty(); }, 60.0));
-  EXPECT_EQ(inference_checkpoint_, model);
+  EXPECT_EQ(inference_checkpoint_, last->state == "reloaded" ? model : work_ + "/served.pt");
 
-  const double after = depth_error(model, "fine_tuned");
-  std::cout << "[trainer test] " << last->message << "; depth error on the scene: served " << before << " m, fine-tuned "
-            << after << " m" << std::endl;
-  EXPECT_LT(after, before);
+  const double after = fs::exists(fine_tuned) ? depth_error(fine_tuned, "fine_tuned") : NAN;
+  std::cout << "[trainer test] " << last->state << ": " << last->message << "; depth error on the scene: served "
+            << before << " m, fine-tuned " << after << " m" << std::endl;
+  if (last->state == "reloaded") {
+    EXPECT_TRUE(fs::exists(model));
+    EXPECT_NE(status().find("serving " + model), std::string::npos) << status();
+    EXPECT_LT(after, before) << "a model with worse depth was reloaded";
+  } else {
+    EXPECT_FALSE(fs::exists(model)) << "a kept model sits under the output name";
+  }
 }
 
 }  // namespace
