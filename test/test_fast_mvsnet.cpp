@@ -102,6 +102,11 @@ TEST_P(FastPath, MatchesTheAutogradPath) {
   EXPECT_LT(depth_rel, 1e-5);
   EXPECT_GE(conf_close, 0.999);
   EXPECT_TRUE(torch::allclose(out.depth_init, ref.depth_init, 1e-5, 0.0));
+
+  // Built a few planes at a time (one plane per slab here), the volume gives the same result.
+  FastMvsNet sliced(model, 1);
+  const MvsOutput slabs = sliced.forward(images, proj, dv, true);
+  EXPECT_LT((slabs.prob_volume - out.prob_volume).abs().max().item<double>(), 1e-6);
 }
 
 INSTANTIATE_TEST_SUITE_P(Sizes, FastPath,
@@ -132,6 +137,11 @@ TEST(FastPath, CostVolumeMatchesTheWarpedVolumes) {
   auto expected = sq / 3.0 - (sum / 3.0).pow(2);
   auto volume = variance_cost_volume(features, proj, dv);
   ASSERT_EQ(volume.sizes(), expected.sizes());
+  // A range of planes, with a zero plane on either side beyond the volume.
+  auto slab = VarianceCostVolume(features, proj, dv).planes(-1, 2);
+  EXPECT_TRUE(torch::equal(slab.slice(2, 1, 3), volume.slice(2, 0, 2)));
+  EXPECT_EQ(slab.select(2, 0).abs().max().item<float>(), 0.0f);
+  EXPECT_EQ(VarianceCostVolume(features, proj, dv).planes(D, D + 1).abs().max().item<float>(), 0.0f);
   EXPECT_TRUE(torch::isfinite(volume).all().item<bool>());
   const double err = (volume - expected).abs().max().item<double>();
   std::cout << "[fast path] cost volume max abs diff " << err << " (values up to " << expected.abs().max().item<double>()

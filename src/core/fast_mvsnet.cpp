@@ -8,6 +8,7 @@
 #include <torch/nn/modules/conv.h>
 #include <torch/utils.h>
 
+#include <algorithm>
 #include <array>
 #include <chrono>
 #include <cmath>
@@ -102,12 +103,12 @@ SubPixelDeconv fold(const torch::nn::ConvTranspose3dImpl& deconv, const torch::n
 }
 
 torch::Tensor onednn_conv3d(const torch::Tensor& x, const torch::Tensor& weight, const torch::Tensor& bias,
-                            int64_t stride, int64_t pad) {
-  return at::mkldnn_convolution(x, weight, bias, {pad, pad, pad}, {stride, stride, stride}, {1, 1, 1}, 1);
+                            int64_t stride, at::IntArrayRef padding) {
+  return at::mkldnn_convolution(x, weight, bias, padding, {stride, stride, stride}, {1, 1, 1}, 1);
 }
 
 torch::Tensor conv_relu(const torch::Tensor& x, const FoldedConv& layer) {
-  return onednn_conv3d(x, layer.weight, layer.bias, layer.stride, 1).relu_();
+  return onednn_conv3d(x, layer.weight, layer.bias, layer.stride, {1, 1, 1}).relu_();
 }
 
 torch::Tensor deconv_relu(const torch::Tensor& x, const SubPixelDeconv& layer) {
@@ -116,13 +117,61 @@ torch::Tensor deconv_relu(const torch::Tensor& x, const SubPixelDeconv& layer) {
   auto out = torch::empty({x.size(0), layer.bias.size(0), 2 * D, 2 * H, 2 * W}, x.options());
   for (int k = 0; k < 8; ++k) {
     // A 1-tap dimension gives one output too many over the padded input: cut it.
-    auto y = onednn_conv3d(padded, layer.weight[k], layer.bias, 1, 0);
+    auto y = onednn_conv3d(padded, layer.weight[k], layer.bias, 1, {0, 0, 0});
     out.slice(2, (k >> 2) & 1, 2 * D, 2)
         .slice(3, (k >> 1) & 1, 2 * H, 2)
         .slice(4, k & 1, 2 * W, 2)
         .copy_(y.slice(2, 0, D).slice(3, 0, H).slice(4, 0, W));
   }
   return out.relu_();
+}
+
+// out[x] += w0 in[x-1] + w1 in[x] + w2 in[x+1] over one row, zero beyond its ends.
+// Compiled for AVX2+FMA too, picked at run time (the build targets baseline x86-64).
+#if defined(__GNUC__) && defined(__x86_64__)
+__attribute__((target_clones("arch=haswell", "default")))
+#endif
+void row_taps3(float* out, const float* in, int64_t width, float w0, float w1, float w2) {
+  if (width == 1) {
+    out[0] += w1 * in[0];
+    return;
+  }
+  out[0] += w1 * in[0] + w2 * in[1];
+  for (int64_t x = 1; x < width - 1; ++x) out[x] += w0 * in[x - 1] + w1 * in[x] + w2 * in[x + 1];
+  out[width - 1] += w0 * in[width - 2] + w1 * in[width - 1];
+}
+
+// A 3-D convolution with a single output channel (kernel 3, padding 1, stride 1) as row
+// AXPYs: oneDNN runs single-output-channel convolutions at a few GFLOP/s (the U-Net's last layer).
+//   x [B,C,D,H,W]; weight [1,C,3,3,3]; bias [1]  -> [B,D,H,W]
+torch::Tensor single_output_conv3d(const torch::Tensor& input, const torch::Tensor& weight, const torch::Tensor& bias) {
+  const auto x = input.contiguous();
+  const int64_t B = x.size(0), C = x.size(1), D = x.size(2), H = x.size(3), W = x.size(4);
+  auto out = torch::empty({B, D, H, W}, x.options());
+  const float* in_p = x.data_ptr<float>();
+  const float* w_p = weight.data_ptr<float>();
+  const float b0 = bias.item<float>();
+  float* out_p = out.data_ptr<float>();
+  at::parallel_for(0, B * D * H, 16, [&](int64_t begin, int64_t end) {
+    for (int64_t row = begin; row < end; ++row) {
+      const int64_t b = row / (D * H), d = (row / H) % D, y = row % H;
+      float* o = out_p + row * W;
+      std::fill_n(o, W, b0);
+      for (int64_t c = 0; c < C; ++c) {
+        for (int64_t kd = 0; kd < 3; ++kd) {
+          const int64_t dd = d + kd - 1;
+          if (dd < 0 || dd >= D) continue;
+          for (int64_t kh = 0; kh < 3; ++kh) {
+            const int64_t yy = y + kh - 1;
+            if (yy < 0 || yy >= H) continue;
+            const float* w = w_p + ((c * 3 + kd) * 3 + kh) * 3;
+            row_taps3(o, in_p + (((b * C + c) * D + dd) * H + yy) * W, W, w[0], w[1], w[2]);
+          }
+        }
+      }
+    }
+  });
+  return out;
 }
 
 }  // namespace
@@ -153,10 +202,26 @@ struct FastMvsNet::FoldedUNet {
     prob = fold(*get("prob", (Conv3dImpl*)nullptr), nullptr);
   }
 
-  // cost [B,32,D,h,w] (consumed)  -> logits [B,D,h,w]; CostRegNetImpl::forward with BN folded.
-  torch::Tensor forward(torch::Tensor cost) const {
-    auto c0 = conv_relu(cost, conv[0]);
-    cost = torch::Tensor();
+  // CostRegNetImpl::forward with BatchNorm folded, on the cost volume built slab by slab: each
+  // slab of planes (with one plane either side) goes through conv0 as soon as it is built, so the
+  // 32-channel volume never exists whole.  -> logits [B,D,h,w]; *volume_seconds: time spent
+  // building the volume.
+  torch::Tensor forward(const VarianceCostVolume& volume, int64_t slab_floats, double* volume_seconds) const {
+    const int64_t D = volume.num_planes();
+    const int64_t slab = std::clamp<int64_t>(slab_floats / volume.plane_elements(), 1, D);
+    torch::Tensor c0;
+    *volume_seconds = 0;
+    for (int64_t begin = 0; begin < D; begin += slab) {
+      const int64_t end = std::min(D, begin + slab);
+      auto t0 = Clock::now();
+      auto planes = volume.planes(begin - 1, end + 1);
+      *volume_seconds += lap(t0);
+      // The halo planes (zeros outside the volume) replace the padding along D.
+      auto y = onednn_conv3d(planes, conv[0].weight, conv[0].bias, 1, {0, 1, 1});
+      if (!c0.defined()) c0 = torch::empty({y.size(0), y.size(1), D, y.size(3), y.size(4)}, y.options());
+      c0.slice(2, begin, end).copy_(y);
+    }
+    c0.relu_();
     auto c2 = conv_relu(conv_relu(c0, conv[1]), conv[2]);
     auto c4 = conv_relu(conv_relu(c2, conv[3]), conv[4]);
     auto x = conv_relu(conv_relu(c4, conv[5]), conv[6]);
@@ -166,11 +231,12 @@ struct FastMvsNet::FoldedUNet {
     c2 = torch::Tensor();
     x = deconv_relu(x, up[2]).add_(c0);
     c0 = torch::Tensor();
-    return onednn_conv3d(x, prob.weight, prob.bias, 1, 1).squeeze(1);
+    return single_output_conv3d(x, prob.weight, prob.bias);
   }
 };
 
-FastMvsNet::FastMvsNet(MvsNet model) : model_(std::move(model)) {
+FastMvsNet::FastMvsNet(MvsNet model, int64_t slab_floats) : model_(std::move(model)), slab_floats_(slab_floats) {
+  TORCH_CHECK(slab_floats > 0, "FastMvsNet: slab_floats must be positive");
   model_->eval();
   if (at::hasMKLDNN()) unet_ = std::make_unique<FoldedUNet>(*model_->cost_regularization);
 }
@@ -190,11 +256,13 @@ MvsOutput FastMvsNet::forward(const torch::Tensor& images, const torch::Tensor& 
   auto t0 = Clock::now();
   auto features = model_->view_features(images);
   t.features = lap(t0);
-  auto volume = variance_cost_volume(features, proj, depth_values);
+  const VarianceCostVolume volume(features, proj, depth_values);
   features = torch::Tensor();
   t.cost_volume = lap(t0);
-  auto prob = torch::softmax(unet_->forward(std::move(volume)), 1);
-  t.regularization = lap(t0);
+  double volume_seconds = 0;
+  auto prob = torch::softmax(unet_->forward(volume, slab_floats_, &volume_seconds), 1);
+  t.cost_volume += volume_seconds;
+  t.regularization = lap(t0) - volume_seconds;
   MvsOutput out;
   out.depth_init = expected_depth(prob, depth_values);
   out.confidence = photometric_confidence(prob);
@@ -206,31 +274,32 @@ MvsOutput FastMvsNet::forward(const torch::Tensor& images, const torch::Tensor& 
   return out;
 }
 
-torch::Tensor variance_cost_volume(const torch::Tensor& features, const torch::Tensor& proj,
-                                   const torch::Tensor& depth_values) {
+VarianceCostVolume::VarianceCostVolume(const torch::Tensor& features, const torch::Tensor& proj,
+                                       const torch::Tensor& depth_values) {
   TORCH_CHECK(features.dim() == 5 && features.device().is_cpu() && features.scalar_type() == torch::kFloat32,
               "variance_cost_volume: features must be float32 [B,V,C,h,w] on the CPU, got ", features.sizes());
-  const int64_t B = features.size(0), V = features.size(1), C = features.size(2), H = features.size(3),
-                W = features.size(4);
-  TORCH_CHECK(proj.dim() == 4 && proj.size(0) == B && proj.size(1) == V, "variance_cost_volume: proj must be [B,V,4,4]");
-  TORCH_CHECK(depth_values.dim() == 2 && depth_values.size(0) == B, "variance_cost_volume: depth_values must be [B,D]");
-  const int64_t D = depth_values.size(1), HW = H * W;
+  B_ = features.size(0), V_ = features.size(1), C_ = features.size(2), H_ = features.size(3), W_ = features.size(4);
+  TORCH_CHECK(proj.dim() == 4 && proj.size(0) == B_ && proj.size(1) == V_, "variance_cost_volume: proj must be [B,V,4,4]");
+  TORCH_CHECK(depth_values.dim() == 2 && depth_values.size(0) == B_, "variance_cost_volume: depth_values must be [B,D]");
+  D_ = depth_values.size(1);
   torch::NoGradGuard no_grad;
-
   // Channels last, so that one bilinear tap reads C contiguous floats.
-  const auto fea = features.permute({0, 1, 3, 4, 2}).contiguous();  // [B,V,h,w,C]
-  const auto depth = depth_values.to(torch::kCPU, torch::kFloat32).contiguous();
+  features_ = features.permute({0, 1, 3, 4, 2}).contiguous();  // [B,V,h,w,C]
+  depth_ = depth_values.to(torch::kCPU, torch::kFloat32).contiguous();
   const auto proj_cpu = proj.to(torch::kCPU, torch::kFloat32);
-  std::vector<torch::Tensor> rot_xyz, trans;  // per source view: [B,3,HW], [B,3]
-  for (int64_t v = 1; v < V; ++v) {
-    auto rays = homography_rays(proj_cpu.select(1, v), proj_cpu.select(1, 0), H, W);
-    rot_xyz.push_back(rays.rot_xyz.contiguous());
-    trans.push_back(rays.trans.reshape({B, 3}).contiguous());
+  for (int64_t v = 1; v < V_; ++v) {
+    auto rays = homography_rays(proj_cpu.select(1, v), proj_cpu.select(1, 0), H_, W_);
+    rot_xyz_.push_back(rays.rot_xyz.contiguous());
+    trans_.push_back(rays.trans.reshape({B_, 3}).contiguous());
   }
-  auto volume = torch::empty({B, C, D, H, W}, features.options());
+}
 
-  const float* fea_p = fea.data_ptr<float>();
-  const float* depth_p = depth.data_ptr<float>();
+torch::Tensor VarianceCostVolume::planes(int64_t begin, int64_t end) const {
+  TORCH_CHECK(begin < end, "VarianceCostVolume::planes: empty range");
+  const int64_t B = B_, V = V_, C = C_, H = H_, W = W_, D = D_, HW = H * W, P = end - begin;
+  auto volume = torch::empty({B, C, P, H, W}, features_.options());
+  const float* fea_p = features_.data_ptr<float>();
+  const float* depth_p = depth_.data_ptr<float>();
   float* volume_p = volume.data_ptr<float>();
   // The arithmetic of homography_warp + grid_sample (align_corners = false), in the same order.
   const float norm_x = static_cast<float>((W - 1) / 2.0), norm_y = static_cast<float>((H - 1) / 2.0);
@@ -239,10 +308,14 @@ torch::Tensor variance_cost_volume(const torch::Tensor& features, const torch::T
   const std::vector<float> zeros(C, 0.0f);
 
   // One task per (batch, plane, row); each keeps its row's sums in [w,C] buffers.
-  at::parallel_for(0, B * D * H, 4, [&](int64_t begin, int64_t end) {
+  at::parallel_for(0, B * P * H, 4, [&](int64_t task_begin, int64_t task_end) {
     std::vector<float> sum(W * C), sq_sum(W * C);
-    for (int64_t task = begin; task < end; ++task) {
-      const int64_t b = task / (D * H), d = (task / H) % D, y = task % H;
+    for (int64_t task = task_begin; task < task_end; ++task) {
+      const int64_t b = task / (P * H), p = (task / H) % P, y = task % H, d = begin + p;
+      if (d < 0 || d >= D) {  // outside the volume: zero padding for the next convolution
+        for (int64_t c = 0; c < C; ++c) std::fill_n(volume_p + (((b * C + c) * P + p) * H + y) * W, W, 0.0f);
+        continue;
+      }
       const float z_plane = depth_p[b * D + d];
       const float* ref_row = fea_p + (b * V * HW + y * W) * C;
       for (int64_t i = 0; i < W * C; ++i) {
@@ -251,10 +324,10 @@ torch::Tensor variance_cost_volume(const torch::Tensor& features, const torch::T
       }
       for (int64_t v = 1; v < V; ++v) {
         const float* src = fea_p + (b * V + v) * HW * C;
-        const float* rx = rot_xyz[v - 1].data_ptr<float>() + b * 3 * HW + y * W;
+        const float* rx = rot_xyz_[v - 1].data_ptr<float>() + b * 3 * HW + y * W;
         const float* ry = rx + HW;
         const float* rz = ry + HW;
-        const float* t = trans[v - 1].data_ptr<float>() + b * 3;
+        const float* t = trans_[v - 1].data_ptr<float>() + b * 3;
         for (int64_t x = 0; x < W; ++x) {
           const float px = rx[x] * z_plane + t[0], py = ry[x] * z_plane + t[1], pz = rz[x] * z_plane + t[2];
           float gx = px / pz / norm_x - 1.0f, gy = py / pz / norm_y - 1.0f;
@@ -283,7 +356,7 @@ torch::Tensor variance_cost_volume(const torch::Tensor& features, const torch::T
         }
       }
       for (int64_t c = 0; c < C; ++c) {
-        float* out = volume_p + (((b * C + c) * D + d) * H + y) * W;
+        float* out = volume_p + (((b * C + c) * P + p) * H + y) * W;
         for (int64_t x = 0; x < W; ++x) {
           const float mean = sum[x * C + c] / num_views;
           out[x] = sq_sum[x * C + c] / num_views - mean * mean;
@@ -292,6 +365,12 @@ torch::Tensor variance_cost_volume(const torch::Tensor& features, const torch::T
     }
   });
   return volume;
+}
+
+torch::Tensor variance_cost_volume(const torch::Tensor& features, const torch::Tensor& proj,
+                                   const torch::Tensor& depth_values) {
+  const VarianceCostVolume volume(features, proj, depth_values);
+  return volume.planes(0, volume.num_planes());
 }
 
 }  // namespace umvs
