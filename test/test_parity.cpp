@@ -74,7 +74,9 @@ TEST_P(Parity, NetworkMatchesReference) {
     MvsStageTimes times;
     auto out = use_fast ? fast.forward(c.imgs, c.proj, c.depth_values, c.prob.defined(), &times)
                         : model.model->forward(c.imgs, c.proj, c.depth_values, c.prob.defined());
-    if (use_fast) EXPECT_GT(times.cost_volume, 0.0) << "the fast path did not run";
+    if (use_fast) {
+      EXPECT_GT(times.cost_volume, 0.0) << "the fast path did not run";
+    }
     if (c.prob.defined()) report(name + " prob_volume", out.prob_volume, c.prob, 0.0, 1e-4, 0.999);
     report(name + " depth", out.depth, c.depth, 1e-4, 0.0, 0.999);
     report(name + " confidence", out.confidence, c.confidence, 0.0, 1e-4, 0.999);
