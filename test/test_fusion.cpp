@@ -5,6 +5,7 @@
 #include <torch/torch.h>
 
 #include <cmath>
+#include <iostream>
 #include <set>
 
 #include "unsup_mvs/core/fusion.h"
@@ -369,6 +370,104 @@ TEST(StreamingFusion, BadViewLeavesStateUnchanged) {
   EXPECT_THROW(stream.add(bad), std::invalid_argument);
   EXPECT_EQ(stream.num_views(), 4u);
   EXPECT_EQ(stream.cloud().size(), n);
+}
+
+TEST(DepthFusion, PerPixelLoopMatchesTensorOps) {
+  // The CPU loop (check_consistency) and the torch-op version used on CUDA, on noisy depth with
+  // holes and mixed confidence, for both source rules.
+  torch::manual_seed(11);
+  auto views = ring_views();
+  for (auto& v : views) {
+    v.depth = v.depth * (1 + 0.004 * torch::randn_like(v.depth));
+    v.depth.masked_fill_(torch::rand_like(v.depth) < 0.05, 0.0f);
+    v.confidence = torch::rand_like(v.depth);
+  }
+  for (const auto rule : {FusionSourceRule::kConfidentNeighbours, FusionSourceRule::kMvsnetEval}) {
+    FusionConfig cfg;
+    cfg.min_confidence = 0.3;
+    cfg.source_rule = rule;
+    for (const auto& [r, s] : std::vector<std::pair<int, int>>{{0, 1}, {0, 3}, {5, 4}}) {
+      const auto& ref = views[r];
+      const auto& src = views[s];
+      auto ref_valid = valid_estimate_mask(ref.depth, ref.confidence, cfg.min_confidence);
+      auto src_valid = valid_estimate_mask(src.depth, src.confidence, cfg.min_confidence);
+      auto loop = check_consistency(ref.depth, ref_valid, ref.camera, src.depth, src_valid, src.camera, cfg);
+      auto ops = check_consistency_tensor_ops(ref.depth, ref_valid, ref.camera, src.depth, src_valid, src.camera, cfg);
+      const int64_t n_loop = loop.agree.sum().item<int64_t>(), n_ops = ops.agree.sum().item<int64_t>();
+      const int64_t differ = (loop.agree != ops.agree).sum().item<int64_t>();
+      auto both = loop.agree & ops.agree;
+      auto depth_diff = ((loop.depth - ops.depth).abs() / ref.depth).masked_select(both);
+      // Where float32 and float64 coordinates round to different 1/32 pixels (mvsnet rule), d'
+      // moves with the depth gradient: a rare event, allowed as for borderline agreement.
+      const int64_t depth_differ = (depth_diff > 1e-5).sum().item<int64_t>();
+      std::cout << "[fusion] rule " << to_string(rule) << " views " << r << "/" << s << ": " << n_loop << " agree (loop), "
+                << n_ops << " (tensor ops), " << differ << " differ, " << depth_differ
+                << " with d' differing by > 1e-5 (median difference " << depth_diff.median().item<double>() << ")\n";
+      EXPECT_GT(n_loop, 150);
+      EXPECT_LE(differ, 3 + n_loop / 500);  // borderline pixels: float32 vs float64 geometry
+      EXPECT_LE(depth_differ, 3 + n_loop / 500);
+      EXPECT_LT(depth_diff.median().item<double>(), 1e-6);
+    }
+  }
+}
+
+TEST(DepthFusion, MvsnetRuleCountsUnconfidentSources) {
+  // Only view 0 is confident. The default rule needs confident source pixels, so nothing
+  // survives; MVSNet's eval.py rule reads the sources' depth whatever their confidence.
+  auto views = ring_views();
+  for (auto& v : views) v.confidence = torch::full_like(v.depth, 0.5);
+  views[0].confidence.fill_(1.0);
+  FusionConfig cfg;
+  const auto sources = all_others(views.size());
+  std::vector<FusionViewStats> neighbours_stats, mvsnet_stats;
+  EXPECT_EQ(DepthFusion(cfg, torch::kCPU).fuse(views, sources, &neighbours_stats).size(), 0u);
+  cfg.source_rule = FusionSourceRule::kMvsnetEval;
+  const PointCloud mvsnet = DepthFusion(cfg, torch::kCPU).fuse(views, sources, &mvsnet_stats);
+  EXPECT_EQ(static_cast<int64_t>(mvsnet.size()), mvsnet_stats[0].points);
+  EXPECT_GT(mvsnet_stats[0].points, 0.5 * mvsnet_stats[0].valid_pixels);
+  expect_accurate(to_tensor(mvsnet));
+  // With everything confident both rules keep about the same pixels of view 0.
+  for (auto& v : views) v.confidence.fill_(1.0);
+  std::vector<FusionViewStats> all_confident;
+  cfg.source_rule = FusionSourceRule::kConfidentNeighbours;
+  DepthFusion(cfg, torch::kCPU).fuse(views, sources, &all_confident);
+  EXPECT_NEAR(static_cast<double>(mvsnet_stats[0].points), static_cast<double>(all_confident[0].points),
+              0.1 * all_confident[0].points);
+}
+
+TEST(DepthFusion, MvsnetRuleReadsTheSourceLikeCv2Remap) {
+  // Reference and source 5 cm apart along x, reference depth 2.1 m everywhere: reference pixel x
+  // lands on source column u = x - f b / d = x - 1.190476. The source depth is a ramp along its
+  // columns, so the depth read there (which, for a pure x translation, is the d' returned) tells
+  // how it was interpolated: at u (default rule) or at u rounded to 1/32 pixel (cv2.remap).
+  const int W = 64, H = 48;
+  const double f = 50, b = 0.05, d = 2.1, slope = 0.01;
+  Camera ref;
+  ref.width = W;
+  ref.height = H;
+  ref.K << f, 0, 31.5, 0, f, 23.5, 0, 0, 1;
+  Camera src = ref;
+  src.T_cam_world(0, 3) = -b;
+  auto ref_depth = torch::full({H, W}, static_cast<float>(d));
+  auto src_depth = (d + slope * (torch::arange(W, torch::kFloat64) - 32)).to(torch::kFloat32).view({1, W}).expand({H, W}).contiguous();
+  FusionConfig cfg;
+  cfg.max_relative_depth = 0.5;
+  cfg.max_reprojection_px = 5.0;
+  auto valid = torch::ones({H, W}, torch::kBool);
+  const auto exact = check_consistency(ref_depth, valid, ref, src_depth, valid, src, cfg);
+  cfg.source_rule = FusionSourceRule::kMvsnetEval;
+  const auto remap = check_consistency(ref_depth, valid, ref, src_depth, valid, src, cfg);
+  const double u_frac = 10 - f * b / d;  // column 10
+  const double u_grid = std::nearbyint(u_frac * 32) / 32;
+  ASSERT_TRUE(exact.agree[20][10].item<bool>());
+  ASSERT_TRUE(remap.agree[20][10].item<bool>());
+  EXPECT_NEAR(exact.depth[20][10].item<double>(), d + slope * (u_frac - 32), 1e-6);
+  EXPECT_NEAR(remap.depth[20][10].item<double>(), d + slope * (u_grid - 32), 1e-6);
+  EXPECT_GT(std::abs(u_grid - u_frac) * slope, 2e-5);  // the two readings differ measurably
+  // Column 0 lands left of the source image (u = -1.19): no depth there with the default rule;
+  // cv2.remap reads 0 beyond the border, which the round trip then rejects.
+  EXPECT_FALSE(exact.agree[20][0].item<bool>());
+  EXPECT_FALSE(remap.agree[20][0].item<bool>());
 }
 
 TEST(DepthFusion, CudaMatchesCpu) {

@@ -10,6 +10,7 @@
 #include <iostream>
 
 #include "test_util.h"
+#include "unsup_mvs/core/fast_mvsnet.h"
 #include "unsup_mvs/core/geometry.h"
 #include "unsup_mvs/io/array_io.h"
 #include "unsup_mvs/io/atomic_file.h"
@@ -65,10 +66,21 @@ TEST_P(Parity, NetworkMatchesReference) {
   torch::NoGradGuard no_grad;
   auto features = model.model->feature(c.imgs.select(1, 0));
   report(GetParam() + " ref_features", features, c.features, 1e-4, 1e-4, 0.999);
-  auto out = model.model->forward(c.imgs, c.proj, c.depth_values, c.prob.defined());
-  if (c.prob.defined()) report(GetParam() + " prob_volume", out.prob_volume, c.prob, 0.0, 1e-4, 0.999);
-  report(GetParam() + " depth", out.depth, c.depth, 1e-4, 0.0, 0.999);
-  report(GetParam() + " confidence", out.confidence, c.confidence, 0.0, 1e-4, 0.999);
+  // The same tolerances through the autograd path (training) and the inference path (umvs infer,
+  // umvs bench, the inference nodelet).
+  FastMvsNet fast(model.model);
+  for (const bool use_fast : {false, true}) {
+    const std::string name = GetParam() + (use_fast ? " fast path" : " autograd path");
+    MvsStageTimes times;
+    auto out = use_fast ? fast.forward(c.imgs, c.proj, c.depth_values, c.prob.defined(), &times)
+                        : model.model->forward(c.imgs, c.proj, c.depth_values, c.prob.defined());
+    if (use_fast) {
+      EXPECT_GT(times.cost_volume, 0.0) << "the fast path did not run";
+    }
+    if (c.prob.defined()) report(name + " prob_volume", out.prob_volume, c.prob, 0.0, 1e-4, 0.999);
+    report(name + " depth", out.depth, c.depth, 1e-4, 0.0, 0.999);
+    report(name + " confidence", out.confidence, c.confidence, 0.0, 1e-4, 0.999);
+  }
 }
 
 INSTANTIATE_TEST_SUITE_P(MvsNetPytorch, Parity, ::testing::Values("parity_small", "parity_full", "parity_livingroom"));

@@ -17,17 +17,22 @@ Camera depth_map_camera(const Camera& network_camera, double scale) {
   return c;
 }
 
+namespace {
+MvsNet moved_to(MvsNet model, const torch::Device& device) {
+  model->to(device);
+  return model;
+}
+}  // namespace
+
 DepthEstimator::DepthEstimator(MvsNet model, torch::Device device, DepthEstimatorConfig config)
-    : model_(std::move(model)), device_(device), config_(config) {
+    : device_(device), network_(moved_to(std::move(model), device)), config_(config) {
   if (config_.num_depth != 0 && (config_.num_depth < 8 || config_.num_depth % 8 != 0)) {
     throw std::invalid_argument("num_depth must be a positive multiple of 8, got " + std::to_string(config_.num_depth));
   }
-  model_->to(device_);
-  model_->eval();
 }
 
 int DepthEstimator::num_depth() const {
-  return config_.num_depth > 0 ? config_.num_depth : model_->config().num_depth;
+  return config_.num_depth > 0 ? config_.num_depth : network_.model()->config().num_depth;
 }
 
 DepthMap DepthEstimator::estimate(const std::vector<ViewInput>& views, double depth_min, double depth_max) {
@@ -54,17 +59,17 @@ DepthMap DepthEstimator::estimate(const std::vector<ViewInput>& views, double de
     cameras.push_back(apply_network_resize(v.camera, plan));
   }
   const int D = num_depth();
-  auto depth_values = depth_hypotheses(depth_min, depth_max, D, model_->config().depth_sampling);
+  auto depth_values = depth_hypotheses(depth_min, depth_max, D, network_.model()->config().depth_sampling);
 
   const auto t0 = std::chrono::steady_clock::now();
+  DepthMap map;
   MvsOutput out;
   {
     torch::NoGradGuard no_grad;
     auto batch = torch::stack(images).unsqueeze(0).to(device_);
     auto proj = mvsnet_projection_matrices(cameras).unsqueeze(0).to(device_);
-    out = model_->forward(batch, proj, depth_values.unsqueeze(0).to(device_));
+    out = network_.forward(batch, proj, depth_values.unsqueeze(0).to(device_), false, &map.stages);
   }
-  DepthMap map;
   map.depth = out.depth.squeeze(0).to(torch::kCPU);
   map.confidence = out.confidence.squeeze(0).to(torch::kCPU);
   map.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();

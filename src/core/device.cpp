@@ -2,6 +2,11 @@
 
 #include <torch/torch.h>
 
+#include <dlfcn.h>
+#include <malloc.h>
+
+#include <climits>
+#include <mutex>
 #include <stdexcept>
 #include <thread>
 
@@ -30,8 +35,26 @@ torch::Device parse_device(const std::string& name) {
 }
 
 void configure_threads(int threads) {
+  tune_cpu_process();
   if (threads <= 0) threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   torch::set_num_threads(threads);
+}
+
+std::string tune_cpu_process() {
+  static std::once_flag once;
+  static std::string done;
+  std::call_once(once, [] {
+    using SetThreads = void (*)(int);
+    if (auto set_threads = reinterpret_cast<SetThreads>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads"))) {
+      set_threads(1);
+      done += "OpenBLAS threads 1; ";
+    }
+    // Blocks above M_MMAP_THRESHOLD (at most 32 MiB) are mmapped and unmapped on free, and the heap
+    // top is returned to the kernel above M_TRIM_THRESHOLD: a cost volume is hundreds of MiB, so
+    // every forward pass would fault all its pages in again (17% of the CPU time at 320x256).
+    if (mallopt(M_MMAP_MAX, 0) == 1 && mallopt(M_TRIM_THRESHOLD, INT_MAX) == 1) done += "malloc without mmap or trimming";
+  });
+  return done;
 }
 
 }  // namespace umvs

@@ -1,5 +1,6 @@
 #include "unsup_mvs/core/fusion.h"
 
+#include <ATen/Parallel.h>
 #include <torch/torch.h>
 
 #include <chrono>
@@ -13,6 +14,16 @@
 namespace umvs {
 
 namespace F = torch::nn::functional;
+
+const char* to_string(FusionSourceRule rule) {
+  return rule == FusionSourceRule::kConfidentNeighbours ? "neighbours" : "mvsnet";
+}
+
+FusionSourceRule fusion_source_rule_from_string(const std::string& s) {
+  if (s == "neighbours") return FusionSourceRule::kConfidentNeighbours;
+  if (s == "mvsnet") return FusionSourceRule::kMvsnetEval;
+  throw std::invalid_argument("unknown fusion source rule '" + s + "' (expected neighbours|mvsnet)");
+}
 
 void FusionConfig::validate() const {
   auto fail = [](const std::string& m) { throw std::invalid_argument("fusion config: " + m); };
@@ -52,10 +63,12 @@ void validate_view(const FusionView& v) {
 struct Prepared {
   int64_t id = 0;
   Camera camera;
-  torch::Tensor depth;       // [H,W] float32
-  torch::Tensor valid;       // [H,W] bool
-  torch::Tensor confidence;  // [H,W] float32
-  torch::Tensor color;       // [H,W,3] uint8
+  torch::Tensor depth;         // [H,W] float32
+  torch::Tensor valid;         // [H,W] bool
+  torch::Tensor confidence;    // [H,W] float32
+  torch::Tensor color;         // [H,W,3] uint8
+  torch::Tensor source_depth;  // [H,W] float32: what the view offers as a source (== depth, or
+                               // with kMvsnetEval every finite positive depth, confident or not)
 };
 
 Prepared prepare(const FusionView& v, const FusionConfig& config, const torch::Device& device) {
@@ -66,6 +79,12 @@ Prepared prepare(const FusionView& v, const FusionConfig& config, const torch::D
   p.confidence = v.confidence.defined() ? v.confidence.to(device, torch::kFloat32) : torch::ones_like(depth);
   p.valid = valid_estimate_mask(depth, p.confidence, config.min_confidence);
   p.depth = torch::where(p.valid, depth, torch::zeros_like(depth));
+  p.source_depth = p.depth;
+  if (config.source_rule == FusionSourceRule::kMvsnetEval) {
+    p.valid &= p.confidence > config.min_confidence;  // eval.py: confidence > threshold
+    p.depth = torch::where(p.valid, depth, torch::zeros_like(depth));
+    p.source_depth = torch::where(torch::isfinite(depth) & (depth > 0), depth, torch::zeros_like(depth));
+  }
   p.color = v.color.defined() ? v.color.to(device)
                               : torch::full({depth.size(0), depth.size(1), 3}, 128,
                                             torch::TensorOptions().dtype(torch::kUInt8).device(device));
@@ -169,12 +188,160 @@ std::vector<int> rank_sources_by_score(const std::vector<Prepared>& views, size_
   return out;
 }
 
-// Accumulates one source's agreement into `count` and `depth_sum` of reference `ref`.
-void accumulate(const Prepared& ref, const Prepared& src, const FusionConfig& config, torch::Tensor& count,
-                torch::Tensor& depth_sum) {
-  auto c = check_consistency(ref.depth, ref.valid, ref.camera, src.depth, src.valid, src.camera, config);
-  count += c.agree.to(torch::kInt32);
-  depth_sum += torch::where(c.agree, c.depth, torch::zeros_like(c.depth));
+// The consistency test of one (reference, source) pair as a per-pixel loop on the CPU: float64
+// geometry, the same steps and thresholds as check_consistency_tensor_ops. rows() calls
+// sink(pixel index, d') for every agreeing reference pixel of rows [y0, y1).
+class PairTest {
+ public:
+  PairTest(const torch::Tensor& ref_depth, const torch::Tensor& ref_valid, const Camera& ref_camera,
+           const torch::Tensor& src_depth, const torch::Tensor& src_valid, const Camera& src_camera,
+           const FusionConfig& config)
+      : ref_depth_(ref_depth.to(torch::kFloat32).contiguous()),
+        ref_valid_(ref_valid.to(torch::kBool).contiguous()),
+        src_depth_(src_depth.to(torch::kFloat32).contiguous()),
+        src_valid_(config.source_rule == FusionSourceRule::kMvsnetEval ? torch::Tensor()
+                                                                       : src_valid.to(torch::kBool).contiguous()),
+        W_(ref_depth.size(1)),
+        Hs_(src_depth.size(0)),
+        Ws_(src_depth.size(1)),
+        config_(config) {
+    const Eigen::Matrix4d T_src_ref = src_camera.T_cam_world * ref_camera.T_world_cam();
+    const Eigen::Matrix4d T_ref_src = ref_camera.T_cam_world * src_camera.T_world_cam();
+    const Eigen::Matrix3d ray_ref = T_src_ref.topLeftCorner<3, 3>() * ref_camera.K.inverse();
+    const Eigen::Matrix3d ray_src = T_ref_src.topLeftCorner<3, 3>() * src_camera.K.inverse();
+    to_src_ = src_camera.K * ray_ref;
+    to_src_offset_ = src_camera.K * T_src_ref.topRightCorner<3, 1>();
+    to_src_z_ = ray_ref.row(2).transpose();
+    to_src_z_offset_ = T_src_ref(2, 3);
+    to_ref_ = ref_camera.K * ray_src;
+    to_ref_offset_ = ref_camera.K * T_ref_src.topRightCorner<3, 1>();
+    to_ref_z_ = ray_src.row(2).transpose();
+    to_ref_z_offset_ = T_ref_src(2, 3);
+  }
+
+  template <class Sink>
+  void rows(int64_t y0, int64_t y1, Sink&& sink) const {
+    const float* ref_depth = ref_depth_.data_ptr<float>();
+    const bool* ref_valid = ref_valid_.data_ptr<bool>();
+    const bool mvsnet = config_.source_rule == FusionSourceRule::kMvsnetEval;
+    for (int64_t y = y0; y < y1; ++y) {
+      for (int64_t x = 0; x < W_; ++x) {
+        const int64_t i = y * W_ + x;
+        if (!ref_valid[i]) continue;
+        const float d = ref_depth[i];
+        // 1. reference pixel -> source pixel (u, v) at depth z in the source camera.
+        const Eigen::Vector3d pixel(static_cast<double>(x), static_cast<double>(y), 1.0);
+        const Eigen::Vector3d p = static_cast<double>(d) * (to_src_ * pixel) + to_src_offset_;
+        const double z = static_cast<double>(d) * to_src_z_.dot(pixel) + to_src_z_offset_;
+        const double pz = std::abs(p.z()) < 1e-6 ? 1e-6 : p.z();
+        const double u = p.x() / pz, v = p.y() / pz;
+        // 2. the source depth there.
+        double d_src;
+        if (mvsnet) {
+          d_src = remap_bilinear(u, v);
+        } else {
+          if (!(u >= 0 && u <= Ws_ - 1 && v >= 0 && v <= Hs_ - 1 && z > 0)) continue;
+          bool all_valid;
+          d_src = bilinear_of_estimates(u, v, &all_valid);
+          if (!all_valid || !(d_src > 0)) continue;
+        }
+        // 3. source pixel with that depth -> reference pixel (u', v') at depth z'.
+        const Eigen::Vector3d src_pixel(u, v, 1.0);
+        const Eigen::Vector3d q = d_src * (to_ref_ * src_pixel) + to_ref_offset_;
+        const float z_back = static_cast<float>(d_src * to_ref_z_.dot(src_pixel) + to_ref_z_offset_);
+        const double qz = std::abs(q.z()) < 1e-9 ? 1e-9 : q.z();
+        // 4. both errors (as eval.py: float32 coordinates and depths).
+        const double du = static_cast<float>(q.x() / qz) - static_cast<double>(x);
+        const double dv = static_cast<float>(q.y() / qz) - static_cast<double>(y);
+        const float rel = std::abs(z_back - d) / d;
+        if (!mvsnet && !(z_back > 0)) continue;
+        if (std::sqrt(du * du + dv * dv) < config_.max_reprojection_px && rel < config_.max_relative_depth) sink(i, z_back);
+      }
+    }
+  }
+
+ private:
+  // Bilinear source depth at (u, v) inside the image (pixel centres); *all_valid: the taps with
+  // weight > 0 are all estimates (their weighted validity > 1 - 1e-4, as the tensor version).
+  double bilinear_of_estimates(double u, double v, bool* all_valid) const {
+    const float* depth = src_depth_.data_ptr<float>();
+    const bool* valid = src_valid_.data_ptr<bool>();
+    const int64_t x0 = static_cast<int64_t>(std::floor(u)), y0 = static_cast<int64_t>(std::floor(v));
+    const double fx = u - x0, fy = v - y0;
+    double value = 0, validity = 0;
+    const double weights[4] = {(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy};
+    for (int k = 0; k < 4; ++k) {
+      const int64_t xx = x0 + (k & 1), yy = y0 + (k >> 1);
+      if (xx >= Ws_ || yy >= Hs_) continue;  // only at the last column/row, with weight 0
+      if (!valid[yy * Ws_ + xx]) continue;  // an invalid tap may hold anything: it reads 0
+      value += weights[k] * depth[yy * Ws_ + xx];
+      validity += weights[k];
+    }
+    *all_valid = validity > 1.0 - 1e-4;
+    return value;
+  }
+
+  // cv2.remap(depth, u, v, INTER_LINEAR) with the default zero border: the coordinates are
+  // rounded to 1/32 pixel (float32, round half to even) and the four float32 weights come from
+  // that grid; taps outside the image read 0.
+  double remap_bilinear(double u, double v) const {
+    const float us = static_cast<float>(u) * 32.0f, vs = static_cast<float>(v) * 32.0f;
+    if (!(std::abs(us) < 1e9f && std::abs(vs) < 1e9f)) return 0.0;
+    const int64_t X = static_cast<int64_t>(std::nearbyint(us)), Y = static_cast<int64_t>(std::nearbyint(vs));
+    const int64_t x0 = X >> 5, y0 = Y >> 5;  // floor division by 32
+    const float fx = static_cast<float>(X & 31) / 32.0f, fy = static_cast<float>(Y & 31) / 32.0f;
+    const float weights[4] = {(1.0f - fy) * (1.0f - fx), (1.0f - fy) * fx, fy * (1.0f - fx), fy * fx};
+    const float* depth = src_depth_.data_ptr<float>();
+    float value = 0.0f;
+    for (int k = 0; k < 4; ++k) {
+      const int64_t xx = x0 + (k & 1), yy = y0 + (k >> 1);
+      const float tap = xx >= 0 && xx < Ws_ && yy >= 0 && yy < Hs_ ? depth[yy * Ws_ + xx] : 0.0f;
+      value += (std::isfinite(tap) ? tap : 0.0f) * weights[k];
+    }
+    return value;
+  }
+
+  torch::Tensor ref_depth_, ref_valid_, src_depth_, src_valid_;
+  int64_t W_, Hs_, Ws_;
+  FusionConfig config_;
+  Eigen::Matrix3d to_src_, to_ref_;
+  Eigen::Vector3d to_src_offset_, to_ref_offset_;
+  Eigen::Vector3d to_src_z_, to_ref_z_;  // third rows of the rotations: depth along the rays
+  double to_src_z_offset_ = 0, to_ref_z_offset_ = 0;
+};
+
+// Rows per task of the per-pixel loop: small maps run on one thread (a parallel region costs
+// more than it saves there).
+int64_t row_grain(int64_t width, size_t num_sources) {
+  const int64_t pixels_per_task = 8192 / static_cast<int64_t>(std::max<size_t>(1, num_sources));
+  return std::max<int64_t>(1, pixels_per_task / std::max<int64_t>(1, width));
+}
+
+// Accumulates the agreement of `sources` into `count` and `depth_sum` of reference `ref`.
+void accumulate(const Prepared& ref, const std::vector<const Prepared*>& sources, const FusionConfig& config,
+                torch::Tensor& count, torch::Tensor& depth_sum) {
+  if (!ref.depth.device().is_cpu()) {
+    for (const Prepared* src : sources) {
+      auto c = check_consistency_tensor_ops(ref.depth, ref.valid, ref.camera, src->source_depth, src->valid, src->camera, config);
+      count += c.agree.to(torch::kInt32);
+      depth_sum += torch::where(c.agree, c.depth, torch::zeros_like(c.depth));
+    }
+    return;
+  }
+  std::vector<PairTest> tests;
+  for (const Prepared* src : sources) {
+    tests.emplace_back(ref.depth, ref.valid, ref.camera, src->source_depth, src->valid, src->camera, config);
+  }
+  int32_t* n = count.data_ptr<int32_t>();
+  float* sum = depth_sum.data_ptr<float>();
+  at::parallel_for(0, ref.depth.size(0), row_grain(ref.depth.size(1), sources.size()), [&](int64_t y0, int64_t y1) {
+    for (const auto& test : tests) {
+      test.rows(y0, y1, [&](int64_t i, float z) {
+        n[i] += 1;
+        sum[i] += z;
+      });
+    }
+  });
 }
 
 double seconds_since(std::chrono::steady_clock::time_point t0) {
@@ -192,6 +359,27 @@ torch::Tensor valid_estimate_mask(const torch::Tensor& depth, const torch::Tenso
 ConsistencyCheck check_consistency(const torch::Tensor& ref_depth, const torch::Tensor& ref_valid, const Camera& ref_camera,
                                    const torch::Tensor& src_depth, const torch::Tensor& src_valid, const Camera& src_camera,
                                    const FusionConfig& config) {
+  if (!ref_depth.device().is_cpu()) {
+    return check_consistency_tensor_ops(ref_depth, ref_valid, ref_camera, src_depth, src_valid, src_camera, config);
+  }
+  torch::NoGradGuard no_grad;
+  const PairTest test(ref_depth, ref_valid, ref_camera, src_depth, src_valid, src_camera, config);
+  ConsistencyCheck out{torch::zeros(ref_depth.sizes(), torch::kBool), torch::zeros(ref_depth.sizes(), torch::kFloat32)};
+  bool* agree = out.agree.data_ptr<bool>();
+  float* depth = out.depth.data_ptr<float>();
+  at::parallel_for(0, ref_depth.size(0), row_grain(ref_depth.size(1), 1), [&](int64_t y0, int64_t y1) {
+    test.rows(y0, y1, [&](int64_t i, float z) {
+      agree[i] = true;
+      depth[i] = z;
+    });
+  });
+  return out;
+}
+
+ConsistencyCheck check_consistency_tensor_ops(const torch::Tensor& ref_depth, const torch::Tensor& ref_valid,
+                                              const Camera& ref_camera, const torch::Tensor& src_depth,
+                                              const torch::Tensor& src_valid, const Camera& src_camera,
+                                              const FusionConfig& config) {
   const auto device = ref_depth.device();
   const int64_t H = ref_depth.size(0), W = ref_depth.size(1);
   const int64_t Hs = src_depth.size(0), Ws = src_depth.size(1);
@@ -212,8 +400,18 @@ ConsistencyCheck check_consistency(const torch::Tensor& ref_depth, const torch::
                           F::GridSampleFuncOptions().mode(torch::kBilinear).padding_mode(torch::kZeros).align_corners(true))
         .view({H, W});
   };
-  auto d_src = sample(torch::where(src_valid, src_depth, torch::zeros_like(src_depth)));
-  auto src_ok = sample(src_valid) > 1.0 - 1e-4;
+  const bool mvsnet = config.source_rule == FusionSourceRule::kMvsnetEval;
+  torch::Tensor d_src, src_ok;
+  if (mvsnet) {
+    // cv2.remap: coordinates rounded to 1/32 pixel, taps outside the image read 0.
+    auto q = [](const torch::Tensor& c) { return torch::round(c * 32) / 32; };
+    grid = torch::stack({q(u) / std::max<double>(1.0, (Ws - 1) / 2.0) - 1.0, q(v) / std::max<double>(1.0, (Hs - 1) / 2.0) - 1.0}, 2)
+               .unsqueeze(0);
+    d_src = sample(torch::where(torch::isfinite(src_depth), src_depth, torch::zeros_like(src_depth)));
+  } else {
+    d_src = sample(torch::where(src_valid, src_depth, torch::zeros_like(src_depth)));
+    src_ok = sample(src_valid) > 1.0 - 1e-4;
+  }
 
   // 3. source pixel with its depth -> reference camera.
   auto pix = torch::stack({u, v, torch::ones_like(u)}).view({3, H * W});
@@ -231,8 +429,8 @@ ConsistencyCheck check_consistency(const torch::Tensor& ref_depth, const torch::
   auto ys = torch::arange(H, d_ref.options()).view({H, 1});
   auto reproj = torch::sqrt((u_back - xs).square() + (v_back - ys).square());
   auto rel = (z - d_ref).abs() / d_ref;
-  auto agree = ref_valid & inside & src_ok & (d_src > 0) & (z > 0) & (reproj < config.max_reprojection_px) &
-               (rel < config.max_relative_depth);
+  auto agree = ref_valid & (reproj < config.max_reprojection_px) & (rel < config.max_relative_depth);
+  if (!mvsnet) agree = agree & inside & src_ok & (d_src > 0) & (z > 0);
   return {agree, z};
 }
 
@@ -247,6 +445,8 @@ struct ReferenceResult {
   torch::Tensor keep;   // [H,W] bool: valid and confirmed by enough sources
   torch::Tensor depth;  // [H,W] float32: mean of the view's and the agreeing depths
   torch::Tensor count;  // [H,W] int32: agreeing sources
+  double ranking_seconds;      // choosing the sources
+  double consistency_seconds;  // checking them against the reference
 };
 
 // The batch rule over all views: checks the inputs (throwing std::invalid_argument naming the
@@ -275,13 +475,20 @@ void for_each_reference(const std::vector<FusionView>& views, const std::vector<
   for (size_t i = 0; i < prepared.size(); ++i) {
     const auto& ref = prepared[i];
     std::vector<int> src = (sources.empty() || sources[i].empty()) ? rank_sources_by_score(prepared, i) : sources[i];
+    const auto t_rank = std::chrono::steady_clock::now();
+    std::vector<int> src = (sources.empty() || sources[i].empty()) ? rank_sources_by_score(prepared, i) : sources[i];
     if (static_cast<int>(src.size()) > config.max_source_views) src.resize(config.max_source_views);
+    const double ranking_seconds = seconds_since(t_rank);
+    const auto t_check = std::chrono::steady_clock::now();
     auto count = torch::zeros_like(ref.depth, torch::kInt32);
     auto depth_sum = ref.depth.clone();
-    for (int j : src) accumulate(ref, prepared[j], config, count, depth_sum);
+    std::vector<const Prepared*> src_views;
+    for (int j : src) src_views.push_back(&prepared[j]);
+    accumulate(ref, src_views, config, count, depth_sum);
+    const double consistency_seconds = seconds_since(t_check);
     auto keep = ref.valid & (count >= config.min_agreeing_views);
     per_view(i, ReferenceResult{&ref, static_cast<int>(src.size()), keep, depth_sum / (count + 1).to(torch::kFloat32),
-                                count});
+                                count, ranking_seconds, consistency_seconds});
   }
 }
 
@@ -294,6 +501,7 @@ PointCloud DepthFusion::fuse(const std::vector<FusionView>& views, const std::ve
   std::unordered_set<int64_t> voxels;
   auto t0 = std::chrono::steady_clock::now();
   for_each_reference(views, sources, config_, device_, [&](size_t, const ReferenceResult& r) {
+    const auto t_points = std::chrono::steady_clock::now();
     PointCloud points = make_points(*r.ref, r.keep, r.depth, r.count);
     if (config_.voxel_size > 0) points = voxel_filter(points, config_.voxel_size, voxels);
     cloud.append(points);
@@ -302,6 +510,9 @@ PointCloud DepthFusion::fuse(const std::vector<FusionView>& views, const std::ve
       s.id = r.ref->id;
       s.num_sources = r.num_sources;
       s.valid_pixels = r.ref->valid.sum().item<int64_t>();
+      s.ranking_seconds = r.ranking_seconds;
+      s.consistency_seconds = r.consistency_seconds;
+      s.points_seconds = seconds_since(t_points);
       s.points = static_cast<int64_t>(points.size());
       s.seconds = seconds_since(t0);
       stats->push_back(s);
@@ -363,10 +574,12 @@ PointCloud StreamingFusion::add(const FusionView& view) {
   };
   PointCloud created;
   for (auto& stored : ring_) {
-    accumulate(stored->view, entry->view, config_, stored->count, stored->depth_sum);
+    accumulate(stored->view, {&entry->view}, config_, stored->count, stored->depth_sum);
     emit(*stored, created);
-    accumulate(entry->view, stored->view, config_, entry->count, entry->depth_sum);
   }
+  std::vector<const Prepared*> stored_views;
+  for (const auto& stored : ring_) stored_views.push_back(&stored->view);
+  accumulate(entry->view, stored_views, config_, entry->count, entry->depth_sum);
   emit(*entry, created);
   ring_.push_back(std::move(entry));
   while (static_cast<int>(ring_.size()) > window_) ring_.pop_front();

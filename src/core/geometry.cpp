@@ -116,6 +116,20 @@ SourceProjection project_to_source(const torch::Tensor& K_ref, const torch::Tens
   return {uv.permute({0, 2, 1}).reshape({B, H, W, 2}), pts_src.select(1, 2).reshape({B, H, W})};
 }
 
+HomographyRays homography_rays(const torch::Tensor& src_proj, const torch::Tensor& ref_proj, int64_t height,
+                               int64_t width) {
+  torch::NoGradGuard no_grad;  // the rays depend on cameras only: no gradient needed
+  const int64_t B = src_proj.size(0), H = height, W = width;
+  auto proj = torch::matmul(src_proj, torch::inverse(ref_proj));
+  auto rot = proj.slice(1, 0, 3).slice(2, 0, 3);    // [B,3,3]
+  auto trans = proj.slice(1, 0, 3).slice(2, 3, 4);  // [B,3,1]
+  auto opts = src_proj.options();
+  auto grid = torch::meshgrid({torch::arange(H, opts), torch::arange(W, opts)}, "ij");
+  auto y = grid[0].reshape({H * W}), x = grid[1].reshape({H * W});
+  auto xyz = torch::stack({x, y, torch::ones_like(x)}).unsqueeze(0).expand({B, 3, H * W});
+  return {torch::matmul(rot, xyz), trans};
+}
+
 torch::Tensor homography_warp(const torch::Tensor& src_fea, const torch::Tensor& src_proj,
                               const torch::Tensor& ref_proj, const torch::Tensor& depth_values) {
   const int64_t B = src_fea.size(0), C = src_fea.size(1), H = src_fea.size(2), W = src_fea.size(3);
@@ -123,16 +137,9 @@ torch::Tensor homography_warp(const torch::Tensor& src_fea, const torch::Tensor&
   torch::Tensor sample_grid;
   {
     torch::NoGradGuard no_grad;  // the sampling grid depends on cameras only: no gradient needed
-    auto proj = torch::matmul(src_proj, torch::inverse(ref_proj));
-    auto rot = proj.slice(1, 0, 3).slice(2, 0, 3);    // [B,3,3]
-    auto trans = proj.slice(1, 0, 3).slice(2, 3, 4);  // [B,3,1]
-    auto opts = src_fea.options();
-    auto grid = torch::meshgrid({torch::arange(H, opts), torch::arange(W, opts)}, "ij");
-    auto y = grid[0].reshape({H * W}), x = grid[1].reshape({H * W});
-    auto xyz = torch::stack({x, y, torch::ones_like(x)}).unsqueeze(0).expand({B, 3, H * W});
-    auto rot_xyz = torch::matmul(rot, xyz);                                         // [B,3,HW]
-    auto rot_depth_xyz = rot_xyz.unsqueeze(2) * depth_values.view({B, 1, D, 1});  // [B,3,D,HW]
-    auto proj_xyz = rot_depth_xyz + trans.view({B, 3, 1, 1});
+    const auto rays = homography_rays(src_proj, ref_proj, H, W);
+    auto rot_depth_xyz = rays.rot_xyz.unsqueeze(2) * depth_values.view({B, 1, D, 1});  // [B,3,D,HW]
+    auto proj_xyz = rot_depth_xyz + rays.trans.view({B, 3, 1, 1});
     auto proj_xy = proj_xyz.slice(1, 0, 2) / proj_xyz.slice(1, 2, 3);
     auto gx = proj_xy.select(1, 0) / ((W - 1) / 2.0) - 1;
     auto gy = proj_xy.select(1, 1) / ((H - 1) / 2.0) - 1;

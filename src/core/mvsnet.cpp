@@ -157,19 +157,37 @@ MvsNetImpl::MvsNetImpl(const MvsNetConfig& config) : config_(config) {
   if (config_.refine) refine_network = register_module("refine_network", RefineNet());
 }
 
-MvsOutput MvsNetImpl::forward(const torch::Tensor& images, const torch::Tensor& proj,
-                              const torch::Tensor& depth_values, bool keep_prob_volume) {
+void MvsNetImpl::check_inputs(const torch::Tensor& images, const torch::Tensor& proj, const torch::Tensor& depth_values) {
   TORCH_CHECK(images.dim() == 5 && images.size(2) == 3, "images must be [B,V,3,H,W], got ", images.sizes());
   TORCH_CHECK(images.size(3) % 32 == 0 && images.size(4) % 32 == 0,
               "image height and width must be multiples of 32, got ", images.size(3), "x", images.size(4));
   TORCH_CHECK(proj.dim() == 4 && proj.size(1) == images.size(1), "proj must be [B,V,4,4]");
   TORCH_CHECK(depth_values.dim() == 2 && depth_values.size(1) % 8 == 0,
               "depth_values must be [B,D] with D a multiple of 8, got ", depth_values.sizes());
-  const int64_t B = images.size(0), V = images.size(1);
+}
 
+torch::Tensor MvsNetImpl::view_features(const torch::Tensor& images) {
+  const int64_t B = images.size(0), V = images.size(1);
   // Shared feature extractor over all views at once.
   auto features = feature(normalize_input_images(images.flatten(0, 1), config_.input_normalization));  // [B*V,32,h,w]
-  features = features.view({B, V, features.size(1), features.size(2), features.size(3)});
+  return features.view({B, V, features.size(1), features.size(2), features.size(3)});
+}
+
+torch::Tensor MvsNetImpl::refine_depth(const torch::Tensor& images, const torch::Tensor& depth_init,
+                                       const torch::Tensor& depth_values) {
+  TORCH_CHECK(refine_network, "this model has no refinement network");
+  auto ref_image = images.select(1, 0);
+  auto small = F::interpolate(ref_image, F::InterpolateFuncOptions()
+                                             .size(std::vector<int64_t>{depth_init.size(1), depth_init.size(2)})
+                                             .mode(torch::kArea));
+  return refine_network(small, depth_init, depth_values.select(1, 0), depth_values.select(1, depth_values.size(1) - 1));
+}
+
+MvsOutput MvsNetImpl::forward(const torch::Tensor& images, const torch::Tensor& proj,
+                              const torch::Tensor& depth_values, bool keep_prob_volume) {
+  check_inputs(images, proj, depth_values);
+  const int64_t V = images.size(1);
+  auto features = view_features(images);  // [B,V,32,h,w]
   const int64_t D = depth_values.size(1);
 
   // Variance cost volume, accumulated view by view so that only a few volumes live at once.
@@ -201,14 +219,7 @@ MvsOutput MvsNetImpl::forward(const torch::Tensor& images, const torch::Tensor& 
     torch::NoGradGuard no_grad;
     out.confidence = photometric_confidence(prob);
   }
-  out.depth = out.depth_init;
-  if (refine_network) {
-    auto ref_image = images.select(1, 0);
-    auto small = F::interpolate(ref_image, F::InterpolateFuncOptions()
-                                               .size(std::vector<int64_t>{prob.size(2), prob.size(3)})
-                                               .mode(torch::kArea));
-    out.depth = refine_network(small, out.depth_init, depth_values.select(1, 0), depth_values.select(1, D - 1));
-  }
+  out.depth = refine_network ? refine_depth(images, out.depth_init, depth_values) : out.depth_init;
   if (keep_prob_volume) out.prob_volume = prob;
   return out;
 }

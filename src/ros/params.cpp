@@ -35,6 +35,9 @@ umvs::FusionConfig fusion_config_from_ros(const ros::NodeHandle& nh) {
   nh.param("max_relative_depth", c.max_relative_depth, c.max_relative_depth);
   nh.param("min_agreeing_views", c.min_agreeing_views, c.min_agreeing_views);
   nh.param("voxel_size", c.voxel_size, c.voxel_size);
+  std::string rule = umvs::to_string(c.source_rule);
+  nh.param("source_rule", rule, rule);
+  c.source_rule = umvs::fusion_source_rule_from_string(rule);
   c.validate();
   return c;
 }

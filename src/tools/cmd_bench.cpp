@@ -7,8 +7,12 @@
 #include <iomanip>
 #include <iostream>
 #include <sstream>
+#include <thread>
+
+#include <sys/resource.h>
 
 #include "unsup_mvs/core/device.h"
+#include "unsup_mvs/core/fast_mvsnet.h"
 #include "unsup_mvs/core/fusion.h"
 #include "unsup_mvs/core/geometry.h"
 #include "unsup_mvs/core/mvsnet.h"
@@ -25,6 +29,12 @@ double peak_rss_mib() {
     if (line.rfind("VmHWM:", 0) == 0) return std::stod(line.substr(6)) / 1024.0;
   }
   return 0.0;
+}
+
+long minor_page_faults() {
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  return usage.ru_minflt;
 }
 
 BenchStats summarize(std::vector<double> seconds) {
@@ -90,7 +100,7 @@ int bench_fusion(const Args& args, const torch::Device& device) {
   FusionConfig cfg;
   cfg.max_source_views = S;
   DepthFusion fusion(cfg, device);
-  std::vector<double> per_view, rates;
+  std::vector<double> per_view, rates, ranking, consistency, making_points;
   size_t points = 0;
   for (int r = 0; r < args.integer("warmup") + runs; ++r) {
     std::vector<FusionViewStats> stats;
@@ -100,8 +110,17 @@ int bench_fusion(const Args& args, const torch::Device& device) {
     if (r < args.integer("warmup")) continue;
     per_view.push_back(total / views.size());
     rates.push_back(points / total);
+    for (const auto& st : stats) {
+      ranking.push_back(st.ranking_seconds);
+      consistency.push_back(st.consistency_seconds);
+      making_points.push_back(st.points_seconds);
+    }
   }
   const auto s = summarize(per_view);
+  // Per reference view, median over views and runs; the rest of a view's time is preparing the
+  // views (validity masks) once per fusion.
+  const double rank_s = summarize(ranking).median, check_s = summarize(consistency).median,
+               points_s = summarize(making_points).median;
   std::sort(rates.begin(), rates.end());
   const double rate = rates[rates.size() / 2];
   std::ostringstream device_name;
@@ -110,12 +129,16 @@ int bench_fusion(const Args& args, const torch::Device& device) {
     std::cout << std::setprecision(6) << "{\"case\": \"fusion\", \"width\": " << W << ", \"height\": " << H << ", \"sources\": " << S
               << ", \"threads\": " << torch::get_num_threads() << ", \"device\": \"" << device_name.str() << "\", \"runs\": " << s.runs
               << ", \"median_s_per_view\": " << s.median << ", \"min_s\": " << s.min << ", \"max_s\": " << s.max
-              << ", \"points_per_s\": " << rate << ", \"points\": " << points << ", \"peak_rss_mib\": " << peak_rss_mib() << "}\n";
+              << ", \"points_per_s\": " << rate << ", \"points\": " << points << ", \"peak_rss_mib\": " << peak_rss_mib()
+              << ", \"stages_median_s_per_view\": {\"ranking\": " << rank_s << ", \"consistency\": " << check_s
+              << ", \"points\": " << points_s << "}}\n";
   } else {
     std::cout << std::fixed << std::setprecision(3) << "fusion " << W << "x" << H << " reference, " << S << " sources, device="
               << device_name.str() << " threads=" << torch::get_num_threads() << ": median " << s.median << " s per reference view (min "
               << s.min << ", max " << s.max << ", " << s.runs << " runs of " << views.size() << " views), " << std::setprecision(0)
-              << rate << " points/s (" << points << " points per run), peak RSS " << peak_rss_mib() << " MiB\n";
+              << rate << " points/s (" << points << " points per run), peak RSS " << peak_rss_mib() << " MiB\n"
+              << std::setprecision(5) << "  stages per view (median s): source ranking " << rank_s << ", consistency "
+              << check_s << ", points " << points_s << "\n";
   }
   return 0;
 }
@@ -127,7 +150,9 @@ UMVS_COMMAND(bench, "time and memory of the network on synthetic input") {
   umvs::Args args("bench",
                   "Times forward passes of MVSNet on random images (random weights unless --checkpoint):\n"
                   "median/min/max seconds per depth map over --runs runs after --warmup runs, achieved\n"
-                  "GFLOP/s (convolutions) and peak memory (process RSS on CPU, allocator peak on CUDA).");
+                  "GFLOP/s (convolutions), the median time of each stage (fast path), minor page faults per\n"
+                  "run and peak memory (process RSS on CPU, allocator peak on CUDA). --path both interleaves\n"
+                  "the inference path and the autograd (training) path and reports both and their ratio.");
   args.option("case", "network", "what to time: network | fusion")
       .option("width", "640", "image width (multiple of 32)")
       .option("height", "512", "image height (multiple of 32)")
@@ -139,16 +164,24 @@ UMVS_COMMAND(bench, "time and memory of the network on synthetic input") {
       .option("runs", "5", "timed runs (>= 5 recommended)")
       .option("warmup", "1", "untimed runs first")
       .option("checkpoint", "", "time these weights (default random init)")
+      .option("path", "fast", "network: fast (inference path, as umvs infer) | autograd (MvsNetImpl::forward) | both")
+      .flag("no-tuning", "leave OpenBLAS threads and malloc as the environment sets them (see tune_cpu_process)")
       .flag("refine", "include the refinement network")
       .flag("json", "print one JSON object instead of text");
   if (!args.parse(argc, argv)) return 0;
-  umvs::configure_threads(args.integer("threads"));
+  if (args.on("no-tuning")) {
+    torch::set_num_threads(args.integer("threads") > 0 ? args.integer("threads") : static_cast<int>(std::thread::hardware_concurrency()));
+  } else {
+    umvs::configure_threads(args.integer("threads"));
+  }
   const auto device = umvs::parse_device(args.str("device"));
   const int W = args.integer("width"), H = args.integer("height"), D = args.integer("num-depth"), V = args.integer("views");
   const int runs = args.integer("runs");
   if (runs < 1) throw std::invalid_argument("--runs must be >= 1");
   if (args.str("case") == "fusion") return umvs::bench_fusion(args, device);
   if (args.str("case") != "network") throw std::invalid_argument("unknown --case '" + args.str("case") + "'");
+  const std::string path = args.str("path");
+  if (path != "fast" && path != "autograd" && path != "both") throw std::invalid_argument("unknown --path '" + path + "' (fast|autograd|both)");
 
   umvs::MvsNetConfig cfg;
   cfg.num_depth = D;
@@ -156,42 +189,91 @@ UMVS_COMMAND(bench, "time and memory of the network on synthetic input") {
   cfg.refine = args.on("refine");
   umvs::MvsNet model = args.str("checkpoint").empty() ? umvs::MvsNet(cfg) : umvs::load_model(args.str("checkpoint"), device, &cfg).model;
   model->to(device);
-  model->eval();
+  umvs::FastMvsNet fast(model);
   torch::manual_seed(0);
   auto images = torch::rand({1, V, 3, H, W}).to(device);
   auto proj = umvs::mvsnet_projection_matrices(umvs::bench_cameras(W, H, V)).unsqueeze(0).to(device);
   auto depth_values = umvs::depth_hypotheses(1.0, 10.0, D, umvs::DepthSampling::kUniformInverseDepth).unsqueeze(0).to(device);
 
-  auto run_once = [&]() {
+  // One timed forward pass of either path; the fast path also reports its stages.
+  auto run_once = [&](bool use_fast, umvs::MvsStageTimes* stages) {
     torch::NoGradGuard no_grad;
-    auto out = model->forward(images, proj, depth_values);
-    if (device.is_cuda()) torch::cuda::synchronize();
-    return out.depth.sum().item<double>();
-  };
-  for (int i = 0; i < args.integer("warmup"); ++i) run_once();
-  std::vector<double> seconds;
-  for (int i = 0; i < runs; ++i) {
     const auto t0 = std::chrono::steady_clock::now();
-    run_once();
-    seconds.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    auto out = use_fast ? fast.forward(images, proj, depth_values, false, stages) : model->forward(images, proj, depth_values);
+    if (device.is_cuda()) torch::cuda::synchronize();
+    out.depth.sum().item<double>();
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  };
+  std::vector<bool> order;  // which path each run takes; both: interleaved fast, autograd, fast, ...
+  if (path == "both") {
+    for (int i = 0; i < runs; ++i) order.insert(order.end(), {true, false});
+  } else {
+    order.assign(runs, path == "fast");
   }
-  const auto s = umvs::summarize(seconds);
+  for (int i = 0; i < args.integer("warmup"); ++i) {
+    if (path != "autograd") run_once(true, nullptr);
+    if (path != "fast") run_once(false, nullptr);
+  }
+  std::vector<double> fast_s, autograd_s;
+  std::vector<double> features_s, volume_s, unet_s, regression_s, refine_s;
+  const long faults_before = umvs::minor_page_faults();
+  for (const bool use_fast : order) {
+    umvs::MvsStageTimes st;
+    const double t = run_once(use_fast, &st);
+    (use_fast ? fast_s : autograd_s).push_back(t);
+    if (!use_fast) continue;
+    features_s.push_back(st.features);
+    volume_s.push_back(st.cost_volume);
+    unet_s.push_back(st.regularization);
+    regression_s.push_back(st.regression);
+    refine_s.push_back(st.refinement);
+  }
+  const double faults_per_run = static_cast<double>(umvs::minor_page_faults() - faults_before) / order.size();
+  const auto s = umvs::summarize(path == "autograd" ? autograd_s : fast_s);
   const double gflop = umvs::mvsnet_forward_flops(H, W, D, V, cfg.refine) / 1e9;
   const double memory_mib = umvs::peak_rss_mib();
+  const bool have_stages = !features_s.empty() && umvs::FastMvsNet::accelerates(device);
   std::ostringstream device_name;
   device_name << device;
+  const std::string path_name = path == "autograd" ? "autograd" : "fast";
   if (args.on("json")) {
-    std::cout << std::setprecision(6) << "{\"case\": \"network\", \"width\": " << W << ", \"height\": " << H
-              << ", \"num_depth\": " << D << ", \"views\": " << V << ", \"threads\": " << torch::get_num_threads()
-              << ", \"device\": \"" << device_name.str() << "\", \"runs\": " << s.runs << ", \"median_s\": " << s.median
-              << ", \"min_s\": " << s.min << ", \"max_s\": " << s.max << ", \"gflop\": " << gflop
-              << ", \"gflops\": " << gflop / s.median << ", \"peak_rss_mib\": " << memory_mib << "}\n";
+    std::cout << std::setprecision(6) << "{\"case\": \"network\", \"path\": \"" << path_name << "\", \"width\": " << W
+              << ", \"height\": " << H << ", \"num_depth\": " << D << ", \"views\": " << V
+              << ", \"threads\": " << torch::get_num_threads() << ", \"device\": \"" << device_name.str()
+              << "\", \"tuned\": " << (args.on("no-tuning") ? "false" : "true") << ", \"runs\": " << s.runs
+              << ", \"median_s\": " << s.median << ", \"min_s\": " << s.min << ", \"max_s\": " << s.max
+              << ", \"gflop\": " << gflop << ", \"gflops\": " << gflop / s.median << ", \"peak_rss_mib\": " << memory_mib
+              << ", \"minor_faults_per_run\": " << faults_per_run;
+    if (have_stages) {
+      std::cout << ", \"stages_median_s\": {\"features\": " << umvs::summarize(features_s).median
+                << ", \"cost_volume\": " << umvs::summarize(volume_s).median << ", \"unet3d\": " << umvs::summarize(unet_s).median
+                << ", \"regression\": " << umvs::summarize(regression_s).median
+                << ", \"refinement\": " << umvs::summarize(refine_s).median << "}";
+    }
+    if (path == "both") {
+      const double a = umvs::summarize(autograd_s).median;
+      std::cout << ", \"autograd_median_s\": " << a << ", \"autograd_over_fast\": " << a / s.median;
+    }
+    std::cout << "}\n";
   } else {
     std::cout << std::fixed << std::setprecision(3) << "network " << W << "x" << H << " D=" << D << " V=" << V
-              << " device=" << device_name.str() << " threads=" << torch::get_num_threads() << ": median " << s.median
-              << " s (min " << s.min << ", max " << s.max << ", " << s.runs << " runs), " << std::setprecision(1)
-              << gflop << " GFLOP -> " << gflop / s.median << " GFLOP/s, peak RSS " << std::setprecision(0)
-              << memory_mib << " MiB\n";
+              << " device=" << device_name.str() << " threads=" << torch::get_num_threads() << " path=" << path_name
+              << (args.on("no-tuning") ? " (untuned)" : "") << ": median " << s.median << " s (min " << s.min << ", max "
+              << s.max << ", " << s.runs << " runs), " << std::setprecision(1) << gflop << " GFLOP -> " << gflop / s.median
+              << " GFLOP/s, peak RSS " << std::setprecision(0) << memory_mib << " MiB, " << faults_per_run
+              << " minor page faults per run\n";
+    if (have_stages) {
+      std::cout << std::setprecision(4) << "  stages (median s): features " << umvs::summarize(features_s).median
+                << ", cost volume " << umvs::summarize(volume_s).median << ", 3-D U-Net " << umvs::summarize(unet_s).median
+                << ", regression " << umvs::summarize(regression_s).median;
+      if (cfg.refine) std::cout << ", refinement " << umvs::summarize(refine_s).median;
+      std::cout << "\n";
+    }
+    if (path == "both") {
+      const auto a = umvs::summarize(autograd_s);
+      std::cout << std::setprecision(3) << "  autograd path, interleaved: median " << a.median << " s (min " << a.min
+                << ", max " << a.max << ") -> autograd / fast = " << a.median / s.median << "\n";
+    }
   }
   return 0;
 }

@@ -114,6 +114,9 @@ UMVS_COMMAND(fuse, "fuse depth maps into one consistent point cloud (PLY)") {
       .option("min-views", "3", "agreeing source views needed")
       .option("max-sources", "10", "sources tested per reference (pair.txt order)")
       .option("voxel", "0", "voxel edge for de-duplication in scene units (0 = off)")
+      .option("source-rule", "neighbours",
+              "which source depths count: neighbours (the 4 source pixels around the projection are confident\n"
+              "estimates) | mvsnet (MVSNet's eval.py: the raw source depth, as cv2.remap reads it)")
       .option("ref", "", "comma-separated view ids to fuse (default: all in pair.txt with a depth map)")
       .flag("stream", "use the streaming fusion (views in pair.txt order, --window recent estimates)")
       .option("window", "10", "with --stream: estimates kept in the ring")
@@ -130,6 +133,7 @@ UMVS_COMMAND(fuse, "fuse depth maps into one consistent point cloud (PLY)") {
   cfg.min_agreeing_views = args.integer("min-views");
   cfg.max_source_views = args.integer("max-sources");
   cfg.voxel_size = args.real("voxel");
+  cfg.source_rule = umvs::fusion_source_rule_from_string(args.str("source-rule"));
   cfg.validate();
   const auto bbox = args.given("bbox") ? parse_bbox(args.str("bbox")) : std::vector<double>{};
 

@@ -6,8 +6,10 @@
 // The model: MVSNet_pytorch's published weights from ../shared/data when present (then the cloud
 // must lie on the true surfaces); otherwise a random-weight model created here, which checks the
 // plumbing only (its depth is meaningless), and the geometry assertion is skipped with a message.
+#include <ros/callback_queue.h>
 #include <rosbag/bag.h>
 #include <rosbag/view.h>
+#include <sensor_msgs/PointCloud2.h>
 #include <tf2_msgs/TFMessage.h>
 #include <torch/torch.h>
 
@@ -15,6 +17,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <map>
+#include <mutex>
 
 #include "rostest_util.h"
 #include "unsup_mvs/DepthEstimate.h"
@@ -72,6 +75,24 @@ TEST(Pipeline, SyntheticBagToFusedCloud) {
   auto est_sub = nh.subscribe<unsup_mvs::DepthEstimate>("/unsup_mvs/depth_estimate", 20, [&](const unsup_mvs::DepthEstimateConstPtr& m) {
     estimates.emplace_back(m, (ros::Time::now() - m->header.stamp).toSec());
   });
+  // Online latency: wall-clock arrival of each keyframe set and of the points the fusion node
+  // publishes for it (same stamp), taken on a spinner thread of their own so that the replay's
+  // sleeps below do not delay them.
+  ros::CallbackQueue timing_queue;
+  ros::NodeHandle timing_nh;
+  timing_nh.setCallbackQueue(&timing_queue);
+  std::mutex timing_mutex;
+  std::map<ros::Time, double> set_arrival, points_arrival;
+  auto set_timing = timing_nh.subscribe<unsup_mvs::KeyframeSet>("/unsup_mvs/keyframes", 20, [&](const unsup_mvs::KeyframeSetConstPtr& m) {
+    std::lock_guard<std::mutex> lock(timing_mutex);
+    set_arrival.emplace(m->header.stamp, ros::WallTime::now().toSec());
+  });
+  auto points_timing = timing_nh.subscribe<sensor_msgs::PointCloud2>("/unsup_mvs/cloud_increment", 20, [&](const sensor_msgs::PointCloud2ConstPtr& m) {
+    std::lock_guard<std::mutex> lock(timing_mutex);
+    points_arrival.emplace(m->header.stamp, ros::WallTime::now().toSec());
+  });
+  ros::AsyncSpinner timing_spinner(1, &timing_queue);
+  timing_spinner.start();
   auto image_pub = nh.advertise<sensor_msgs::Image>("/camera/image_rect_color", 5);
   auto info_pub = nh.advertise<sensor_msgs::CameraInfo>("/camera/camera_info", 5);
   auto tf_pub = nh.advertise<tf2_msgs::TFMessage>("/tf", 50);
@@ -139,6 +160,19 @@ TEST(Pipeline, SyntheticBagToFusedCloud) {
               "(image to depth estimate) %.2f s, network %.2f s; model %s\n",
               frames, sets.size(), estimates.size(), static_cast<unsigned long>(save_srv.response.num_points),
               latency_sum / estimates.size(), network_sum / estimates.size(), trained ? "MVSNet_pytorch" : "random weights");
+
+  {
+    std::lock_guard<std::mutex> lock(timing_mutex);
+    std::vector<double> latency;
+    for (const auto& [stamp, t_points] : points_arrival) {
+      if (set_arrival.count(stamp)) latency.push_back(t_points - set_arrival.at(stamp));
+    }
+    std::sort(latency.begin(), latency.end());
+    const auto pct = [&](double p) { return latency.empty() ? 0.0 : latency[static_cast<size_t>(p * (latency.size() - 1) + 0.5)]; };
+    std::printf("[pipeline test] keyframe set -> fused points published: %zu sets with points; latency p50 %.3f s, "
+                "p90 %.3f s, max %.3f s\n", latency.size(), pct(0.5), pct(0.9), pct(1.0));
+  }
+  timing_spinner.stop();
 
   if (!trained) {
     GTEST_SKIP() << "../shared/data/mvsnet_parity not found: the pipeline ran with random weights, so the cloud's "

@@ -1,6 +1,7 @@
 // One depth map from a reference view and its source views: resizes/crops the images to the
 // network size (intrinsics kept consistent), builds the projection matrices and the depth
-// hypotheses, runs MVSNet without gradients. Shared by `umvs infer` and the inference nodelet.
+// hypotheses, runs MVSNet's inference path (FastMvsNet) without gradients. Shared by
+// `umvs infer` and the inference nodelet.
 #pragma once
 
 #include <torch/types.h>
@@ -8,6 +9,7 @@
 #include <vector>
 
 #include "unsup_mvs/core/camera.h"
+#include "unsup_mvs/core/fast_mvsnet.h"
 #include "unsup_mvs/core/mvsnet.h"
 
 namespace umvs {
@@ -31,6 +33,7 @@ struct DepthMap {
   Camera network_camera;     // camera of the network input image (after resize and crop)
   double depth_min = 0.0, depth_max = 0.0;
   double seconds = 0.0;      // network time, including transfers
+  MvsStageTimes stages;      // where the network time went (CPU fast path only)
 };
 
 class DepthEstimator {
@@ -41,14 +44,16 @@ class DepthEstimator {
   // depth range, invalid cameras, mismatched image sizes or fewer than 2 views.
   DepthMap estimate(const std::vector<ViewInput>& views, double depth_min, double depth_max);
 
-  MvsNet& model() { return model_; }
+  // The model's weights are folded when the estimator is built: build a new estimator after
+  // changing them.
+  MvsNet& model() { return network_.model(); }
   const torch::Device& device() const { return device_; }
   const DepthEstimatorConfig& config() const { return config_; }
   int num_depth() const;
 
  private:
-  MvsNet model_;
   torch::Device device_;
+  FastMvsNet network_;
   DepthEstimatorConfig config_;
 };
 

@@ -14,8 +14,15 @@
 // coloured by the reference, carrying the reference confidence and the number of agreeing
 // sources (PointCloud::num_views).
 //
-// Everything is batched tensor code (one reference against one source at a time over all its
-// pixels) and runs on the device given to the constructor; the resulting cloud is on the CPU.
+// On the CPU the consistency test is one multi-threaded loop over the reference pixels; on
+// other devices (CUDA) it is batched tensor code (check_consistency_tensor_ops). The resulting
+// cloud is on the CPU.
+//
+// FusionSourceRule::kMvsnetEval replaces step 2's rule by MVSNet's eval.py
+// (check_geometric_consistency): the source depth is read from the raw source depth map,
+// confident or not, as cv2.remap does (bilinear, coordinates rounded to 1/32 pixel, 0 outside
+// the image), and reference pixels need confidence > min_confidence (strictly). With it, the
+// fused cloud of MVSNet depth maps is eval.py's point for point.
 #pragma once
 
 #include <torch/types.h>
@@ -23,6 +30,7 @@
 #include <cstdint>
 #include <deque>
 #include <memory>
+#include <string>
 #include <unordered_set>
 #include <vector>
 
@@ -30,6 +38,14 @@
 #include "unsup_mvs/core/point_cloud.h"
 
 namespace umvs {
+
+// Which source pixels may confirm a reference pixel (see the top of this file).
+enum class FusionSourceRule {
+  kConfidentNeighbours,  // the four source pixels around the projection are all estimates
+  kMvsnetEval,           // MVSNet's eval.py: the raw source depth, zero outside the image
+};
+const char* to_string(FusionSourceRule rule);
+FusionSourceRule fusion_source_rule_from_string(const std::string& s);  // "neighbours" | "mvsnet"
 
 struct FusionConfig {
   double min_confidence = 0.8;      // pixels below this confidence are no estimate (0 = keep all)
@@ -39,6 +55,7 @@ struct FusionConfig {
   int max_source_views = 10;        // batch: sources tested per reference, best first
   double voxel_size = 0.0;          // > 0: at most one point per voxel of this edge (metres),
                                     // the first one fused wins; 0 = off (one point per pixel)
+  FusionSourceRule source_rule = FusionSourceRule::kConfidentNeighbours;
 
   // Throws std::invalid_argument naming the offending field.
   void validate() const;
@@ -59,7 +76,10 @@ struct FusionViewStats {
   int num_sources = 0;       // sources tested
   int64_t valid_pixels = 0;  // pixels that are an estimate (depth and confidence)
   int64_t points = 0;        // points this view added to the cloud
-  double seconds = 0.0;
+  double seconds = 0.0;      // all of this view's work, the stages below included
+  double ranking_seconds = 0.0;      // ranking the sources (only without a source list)
+  double consistency_seconds = 0.0;  // the consistency tests against all sources
+  double points_seconds = 0.0;       // making the points (and the voxel filter)
 };
 
 // Batch fusion: every view is a reference once, tested against its sources.
@@ -140,9 +160,12 @@ torch::Tensor valid_estimate_mask(const torch::Tensor& depth, const torch::Tenso
 
 // Geometric consistency of a reference depth map with one source.
 //   ref_depth [H,W] (invalid pixels may hold anything), ref_valid [H,W] bool,
-//   src_depth [Hs,Ws], src_valid [Hs,Ws] bool, all on one device.
+//   src_depth [Hs,Ws], src_valid [Hs,Ws] bool, all on one device. With kMvsnetEval, src_depth
+//   is read as it is (0 or non-finite = no depth) and src_valid is not used.
 //   -> agree [H,W] bool, depth [H,W] float32: the source's depth seen from the reference (d'),
 //      meaningful where agree is true.
+// On the CPU a per-pixel loop (float64 geometry), elsewhere check_consistency_tensor_ops; the
+// two agree up to float32 rounding of the geometry (tested).
 struct ConsistencyCheck {
   torch::Tensor agree;
   torch::Tensor depth;
@@ -151,5 +174,9 @@ ConsistencyCheck check_consistency(const torch::Tensor& ref_depth, const torch::
                                    const Camera& ref_camera, const torch::Tensor& src_depth,
                                    const torch::Tensor& src_valid, const Camera& src_camera,
                                    const FusionConfig& config);
+ConsistencyCheck check_consistency_tensor_ops(const torch::Tensor& ref_depth, const torch::Tensor& ref_valid,
+                                              const Camera& ref_camera, const torch::Tensor& src_depth,
+                                              const torch::Tensor& src_valid, const Camera& src_camera,
+                                              const FusionConfig& config);
 
 }  // namespace umvs

@@ -51,6 +51,17 @@ struct SourceProjection {
 SourceProjection project_to_source(const torch::Tensor& K_ref, const torch::Tensor& K_src,
                                    const torch::Tensor& T_src_ref, const torch::Tensor& depth);
 
+// The part of MVSNet's homography that does not depend on depth: for every reference pixel
+// (x, y) at feature resolution, rot_xyz = R (x, y, 1)^T and trans = t, where [R | t] are the top
+// rows of src_proj * ref_proj^-1. The source point of depth d is rot_xyz * d + trans.
+//   src_proj, ref_proj [B,4,4]  -> rot_xyz [B,3,H*W] (row-major pixels), trans [B,3,1]
+struct HomographyRays {
+  torch::Tensor rot_xyz;
+  torch::Tensor trans;
+};
+HomographyRays homography_rays(const torch::Tensor& src_proj, const torch::Tensor& ref_proj, int64_t height,
+                               int64_t width);
+
 // MVSNet's differentiable homography warp of source features into the reference frustum.
 //   src_features [B,C,H,W]; src_proj, ref_proj [B,4,4] (mvsnet_projection_matrix at feature
 //   resolution); depth_values [B,D]  -> [B,C,D,H,W], zero outside the source image.

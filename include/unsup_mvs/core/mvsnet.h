@@ -126,6 +126,16 @@ class MvsNetImpl : public torch::nn::Module {
   MvsOutput forward(const torch::Tensor& images, const torch::Tensor& proj,
                     const torch::Tensor& depth_values, bool keep_prob_volume = false);
 
+  // The pieces of forward() that the inference path (core/fast_mvsnet.h) shares with it:
+  // throws c10::Error naming the bad argument of forward();
+  static void check_inputs(const torch::Tensor& images, const torch::Tensor& proj, const torch::Tensor& depth_values);
+  // the 2-D features of every view: images as forward()  -> [B,V,32,H/4,W/4];
+  torch::Tensor view_features(const torch::Tensor& images);
+  // the refinement network's depth (config.refine only): images as forward(), depth_init
+  // [B,H/4,W/4], depth_values [B,D]  -> [B,H/4,W/4].
+  torch::Tensor refine_depth(const torch::Tensor& images, const torch::Tensor& depth_init,
+                             const torch::Tensor& depth_values);
+
   const MvsNetConfig& config() const { return config_; }
   // The hypotheses count used by forward() is taken from depth_values; this only updates the
   // config that is saved with checkpoints and used by callers to build depth_values.

@@ -11,5 +11,6 @@ struct BenchStats {
 };
 BenchStats summarize(std::vector<double> seconds);
 double peak_rss_mib();  // peak resident memory of this process (VmHWM)
+long minor_page_faults();  // of this process so far (getrusage)
 
 }  // namespace umvs
