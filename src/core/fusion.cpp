@@ -474,7 +474,6 @@ void for_each_reference(const std::vector<FusionView>& views, const std::vector<
   for (const auto& v : views) prepared.push_back(prepare(v, config, device));
   for (size_t i = 0; i < prepared.size(); ++i) {
     const auto& ref = prepared[i];
-    std::vector<int> src = (sources.empty() || sources[i].empty()) ? rank_sources_by_score(prepared, i) : sources[i];
     const auto t_rank = std::chrono::steady_clock::now();
     std::vector<int> src = (sources.empty() || sources[i].empty()) ? rank_sources_by_score(prepared, i) : sources[i];
     if (static_cast<int>(src.size()) > config.max_source_views) src.resize(config.max_source_views);
