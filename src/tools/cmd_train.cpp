@@ -185,7 +185,7 @@ Data open_bags(const umvs::Args& args, const umvs::TupleConfig& config, bool eva
 
 // Options that a --resume may change: they do not change what the run computes. All others
 // (data, sizes, loss, optimiser, seed, validation, ...) are the run's configuration.
-const std::vector<std::string> kMayChangeOnResume = {"steps", "out", "resume", "overwrite", "eval-only", "device",
+const std::vector<std::string> kMayChangeOnResume = {"steps", "max-minutes", "out", "resume", "overwrite", "eval-only", "device",
                                                      "threads"};
 
 // Every option as given or defaulted; file and folder paths made absolute, so that a resume from
@@ -228,6 +228,9 @@ void check_training_options(const umvs::Args& args) {
   at_least("save-every", 1);
   at_least("val-tuples", 0);
   at_least("seed", 0);
+  if (!(args.real("max-minutes") >= 0)) {
+    throw std::invalid_argument("--max-minutes must be >= 0 (0 = no limit), got " + args.str("max-minutes"));
+  }
   if (args.integer("augment") != 0 && args.integer("augment") != 1) throw std::invalid_argument("--augment must be 0 or 1");
   umvs::depth_sampling_from_string(args.str("depth-sampling"));
   if (args.given("eval-only")) {
@@ -311,6 +314,7 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
       .option("val", "", "validation folder(s), comma-separated")
       .option("val-tuples", "0", "validate on at most this many tuples (0 = all)")
       .option("save-every", "500", "validate and checkpoint every this many steps (and at the end)")
+      .option("max-minutes", "0", "stop after this much wall time (checkpoint, resumable with --resume; 0 = no limit)")
       .option("augment", "1", "1: random zoom/crop and photometric jitter; 0: none")
       .option("jitter", "0.1", "photometric jitter strength")
       .option("seed", "1", "seed of the initial weights and of the data order")
@@ -517,6 +521,8 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
   const int64_t total_steps = args.integer("steps");
   const int save_every = args.integer("save-every");
   const int batch = args.integer("batch");
+  const double max_seconds = 60.0 * args.real("max-minutes");
+  const auto started = std::chrono::steady_clock::now();
   double interval_loss = 0;
   int interval_count = 0;
 
@@ -617,16 +623,23 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
       interval_loss += row.loss.total;
       ++interval_count;
     }
-    if (step % save_every == 0 || step == total_steps) {
+    const bool out_of_time =
+        max_seconds > 0 && std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count() >= max_seconds;
+    if (step % save_every == 0 || step == total_steps || out_of_time) {
       checkpoint(row);
     }
     log << csv_line(row) << "\n" << std::flush;
     history.push_back(row);
-    if (row.has_val || step == total_steps) write_curve(out + "/loss_curve.png", history);
+    if (row.has_val || step == total_steps || out_of_time) write_curve(out + "/loss_curve.png", history);
     char extra[160];
     std::snprintf(extra, sizeof(extra), "loss %.4f (photo %.4f ssim %.4f smooth %.4f sup %.3f)", row.loss.total,
                   row.loss.photometric, row.loss.ssim, row.loss.smoothness, row.loss.supervised);
     progress.update(step - first, extra);
+    if (out_of_time) {
+      std::cerr << "\n--max-minutes " << args.real("max-minutes") << " reached at step " << step
+                << ": checkpointed; continue with --resume\n";
+      break;
+    }
   }
   progress.finish();
   std::cout << "trained to step " << step << "; checkpoints " << last_path << ", " << best_path << " (best score "
