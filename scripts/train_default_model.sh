@@ -1,19 +1,22 @@
 #!/usr/bin/env bash
-# Trains the default model models/unsup_mvsnet.pt from random weights, with no real label:
-#   * rendered scenes (`umvs synth`: furnished rooms, streets with facades, objects on a table;
-#     lighting changes, specular and textureless patches) are supervised on their exact depth
-#     (smooth L1 in depth intervals, MVSNet's loss);
+# Trains the default model models/unsup_mvsnet.pt with no real label:
+#   * rendered scenes (`scripts/render_training_scenes.sh`: objects on a table, furnished rooms,
+#     corridors and streets wearing photographs, object-scan and robot camera paths, lighting
+#     changes, specular and textureless patches) are supervised on their exact depth (smooth L1 in
+#     depth intervals, MVSNet's loss);
 #   * real, unlabeled images (Middlebury templeRing, when ../shared/data/templeRing exists) train
 #     with the robust photometric loss (paper weights) in the same optimisation;
 #   * inputs are normalised per image and channel, and tuples are darkened/brightened by a random
 #     exposure gain, so that a dark or low-contrast camera gives the same depth;
-#   * planes are spaced in inverse depth (robot scenes span 0.3-10 m and more).
+#   * planes are spaced in inverse depth (robot scenes span 0.3-30 m).
 # Held-out rendered scenes (other seeds) are validated on; the model is last.pt (no label of the
 # real data picks it). Writes WORK/run/{last.pt,best.pt,train_log.csv,loss_curve.png}; rerunning
 # resumes from WORK/run/last.pt.
 #
 # Usage: scripts/train_default_model.sh [WORK_DIR]
-#   environment: UMVS, STEPS (default 6000), THREADS (2), SEED (1), SCENES_PER_RECIPE (8)
+#   environment: UMVS, STEPS (6000), THREADS (2), SEED (1), SCENES_PER_RECIPE (8), TEXTURES
+#   (installed | DIR[,DIR] | none), DEVICE (cpu | cuda), WIDTH x HEIGHT, NUM_DEPTH (160 x 128, 32),
+#   BATCH (1), INIT (start from this checkpoint instead of random weights), MAX_MINUTES (0: none)
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
@@ -23,6 +26,14 @@ STEPS="${STEPS:-6000}"
 THREADS="${THREADS:-2}"
 SEED="${SEED:-1}"
 SCENES_PER_RECIPE="${SCENES_PER_RECIPE:-8}"
+TEXTURES="${TEXTURES:-installed}"
+DEVICE="${DEVICE:-cpu}"
+WIDTH="${WIDTH:-160}"
+HEIGHT="${HEIGHT:-128}"
+NUM_DEPTH="${NUM_DEPTH:-32}"
+BATCH="${BATCH:-1}"
+INIT="${INIT:-}"
+MAX_MINUTES="${MAX_MINUTES:-0}"
 SHARED="${UMVS_SHARED_DATA:-$here/../../shared/data}"
 
 [ -x "$UMVS" ] || { echo "umvs not found at $UMVS (set UMVS=/path/to/umvs)" >&2; exit 1; }
@@ -32,37 +43,12 @@ mkdir -p "$WORK/data"
 export MALLOC_MMAP_THRESHOLD_=33554432 MALLOC_TRIM_THRESHOLD_=4294967296 MALLOC_TOP_PAD_=268435456
 export OPENBLAS_NUM_THREADS=1
 
-render() {  # name scene seed views [extra synth options...]
-  local name=$1 scene=$2 seed=$3 views=$4
-  shift 4
-  local dir="$WORK/data/$name"
-  if [ ! -f "$dir/pair.txt" ]; then
-    echo "[default-model] rendering $name"
-    "$UMVS" synth --out "$dir" --scene "$scene" --seed "$seed" --views "$views" --width 320 --height 256 \
-      --gt-samples 0 --threads "$THREADS" "$@" >/dev/null
-  fi
-}
-
-# Training scenes: seeds 1001.. (every 4th without lighting change, otherwise every 3rd with
-# specular highlights; every 5th weakly textured); held-out scenes: seeds 2001-2003, never trained on.
-supervised_dirs=()
-seed=1000
-for scene in room facade dtu_like; do
-  for ((i = 0; i < SCENES_PER_RECIPE; i++)); do
-    seed=$((seed + 1))
-    opts=(--lighting-change 1)
-    if ((i % 4 == 3)); then opts=(--lighting-change 0); elif ((i % 3 == 2)); then opts+=(--specular); fi
-    ((i % 5 == 4)) && opts+=(--texture 0.3)
-    render "${scene}_$seed" "$scene" "$seed" 16 "${opts[@]}"
-    supervised_dirs+=("$WORK/data/${scene}_$seed")
-  done
-done
-val_dirs=()
-for spec in "room 2001" "facade 2002" "dtu_like 2003"; do
-  read -r scene s <<<"$spec"
-  render "val_${scene}_$s" "$scene" "$s" 10 --lighting-change 1
-  val_dirs+=("$WORK/data/val_${scene}_$s")
-done
+# Training scenes (seeds 1000..) and held-out scenes (seeds 5000.., never trained on), rendered at
+# 320x256; training zooms, crops and scales them to WIDTH x HEIGHT.
+UMVS="$UMVS" TEXTURES="$TEXTURES" WIDTH=320 HEIGHT=256 THREADS="$THREADS" \
+  bash "$here/render_training_scenes.sh" "$WORK/data/rendered" "$SCENES_PER_RECIPE" 1
+supervised_list="$(cat "$WORK/data/rendered/train.txt")"
+val_list="$(cat "$WORK/data/rendered/heldout.txt")"
 
 photometric=()
 if [ -d "$SHARED/templeRing" ]; then
@@ -72,17 +58,18 @@ if [ -d "$SHARED/templeRing" ]; then
 else
   echo "[default-model] $SHARED/templeRing not found: supervised on rendered scenes only"
 fi
-join() { local IFS=,; echo "$*"; }
 if ((${#photometric[@]} == 0)); then
-  data=(--data "$(join "${supervised_dirs[@]}")" --loss supervised)
+  data=(--data "$supervised_list" --loss supervised)
 else
-  data=("${photometric[@]}" --supervised-data "$(join "${supervised_dirs[@]}")" --loss robust)
+  data=("${photometric[@]}" --supervised-data "$supervised_list" --loss robust)
 fi
+start=()
+[ -n "$INIT" ] && start=(--init "$INIT")
 
 resume=()
-[ -f "$WORK/run/last.pt" ] && resume=(--resume)
-"$UMVS" train "${data[@]}" --val "$(join "${val_dirs[@]}")" --out "$WORK/run" --width 160 --height 128 \
-  --num-depth 32 --depth-sampling inverse_depth --input-normalization per_image_channel \
+if [ -f "$WORK/run/last.pt" ]; then resume=(--resume) start=(); fi
+"$UMVS" train "${data[@]}" --val "$val_list" --out "$WORK/run" --width "$WIDTH" --height "$HEIGHT" \
+  --num-depth "$NUM_DEPTH" --batch "$BATCH" --device "$DEVICE" --max-minutes "$MAX_MINUTES" --depth-sampling inverse_depth --input-normalization per_image_channel \
   --views-in 3 --views-loss 6 --top-k 3 --preset paper --supervised-weight 0.1 --min-gain 0.25 --max-gain 1.5 \
-  --steps "$STEPS" --save-every 500 --val-tuples 15 --seed "$SEED" --threads "$THREADS" "${resume[@]}"
+  --steps "$STEPS" --save-every 500 --val-tuples 15 --seed "$SEED" --threads "$THREADS" "${start[@]}" "${resume[@]}"
 echo "[default-model] done: $WORK/run/last.pt (copy it to models/unsup_mvsnet.pt)"
