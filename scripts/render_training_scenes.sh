@@ -12,7 +12,8 @@
 # comma-separated list for `umvs train --data` / `--val`. A folder already complete (scene.txt is
 # written last) is kept, so an interrupted run resumes.
 # Environment: UMVS (the binary), TEXTURES (default `installed`: scripts/install_textures.sh; a
-# folder list DIR[,DIR]; `none` = procedural), WIDTH, HEIGHT, THREADS (0 = all cores).
+# folder list DIR[,DIR]; `none` = procedural), WIDTH, HEIGHT, THREADS (0 = all cores), JOBS
+# (scenes rendered at once, default 1).
 # Seeds: training 1000 + i, held-out 5000 + i (no other script uses these).
 set -euo pipefail
 
@@ -25,6 +26,7 @@ TEXTURES="${TEXTURES:-installed}"
 WIDTH="${WIDTH:-160}"
 HEIGHT="${HEIGHT:-128}"
 THREADS="${THREADS:-0}"
+JOBS="${JOBS:-1}"  # scenes rendered at once (each with THREADS threads)
 
 [ -x "$UMVS" ] || { echo "umvs not found at $UMVS (set UMVS=/path/to/umvs)" >&2; exit 1; }
 if [ "$TEXTURES" = installed ] && [ ! -d /usr/share/gimp/2.0/patterns ] && [ ! -d /usr/share/backgrounds/mate/nature ]; then
@@ -44,28 +46,36 @@ trajectories() {
 
 start=$(date +%s)
 rendered=0
+render_one() {  # set recipe seed trajectory
+  local set="$1" recipe="$2" seed="$3" traj="$4"
+  local dir="$OUT/$set/${recipe}_$seed" views=$((12 + seed % 9)) extra=()
+  ((seed % 3 == 0)) && extra+=(--specular)
+  "$UMVS" synth --out "$dir" --scene "$recipe" --seed "$seed" --views "$views" --width "$WIDTH" --height "$HEIGHT" \
+    --trajectory "$traj" --lighting-change 1 --textures "$TEXTURES" --gt-samples 0 --threads "$THREADS" \
+    "${extra[@]}" >"$OUT/$set/${recipe}_$seed.log" ||
+    { echo "[render] $set/${recipe}_$seed failed:" >&2; cat "$OUT/$set/${recipe}_$seed.log" >&2;
+      touch "$OUT/$set/${recipe}_$seed.failed"; return 1; }
+  echo "[render] $set/${recipe}_$seed: $views views, $traj ($(tail -n 2 "$OUT/$set/${recipe}_$seed.log" | head -n 1))"
+}
 render_set() {  # set first_seed count
   local set="$1" first="$2" count="$3" dirs=()
   mkdir -p "$OUT/$set"
+  rm -f "$OUT/$set"/*.failed
   for recipe in dtu_like room corridor facade; do
     read -r -a trajs <<<"$(trajectories "$recipe")"
     for ((i = 0; i < count; ++i)); do
       local seed=$((first + i))
       local dir="$OUT/$set/${recipe}_$seed"
-      local traj="${trajs[$((i % ${#trajs[@]}))]}"
-      local views=$((12 + seed % 9))
-      local extra=()
-      ((seed % 3 == 0)) && extra+=(--specular)
       if [ ! -f "$dir/scene.txt" ]; then
-        "$UMVS" synth --out "$dir" --scene "$recipe" --seed "$seed" --views "$views" --width "$WIDTH" --height "$HEIGHT" \
-          --trajectory "$traj" --lighting-change 1 --textures "$TEXTURES" --gt-samples 0 --threads "$THREADS" \
-          "${extra[@]}" >"$OUT/$set/${recipe}_$seed.log"
+        while (($(jobs -rp | wc -l) >= JOBS)); do wait -n || true; done
+        render_one "$set" "$recipe" "$seed" "${trajs[$((i % ${#trajs[@]}))]}" &
         rendered=$((rendered + 1))
-        echo "[render] $set/${recipe}_$seed: $views views, $traj ($(tail -n 2 "$OUT/$set/${recipe}_$seed.log" | head -n 1))"
       fi
       dirs+=("$dir")
     done
   done
+  wait
+  if compgen -G "$OUT/$set/*.failed" >/dev/null; then echo "[render] some scenes failed (see above)" >&2; exit 1; fi
   (IFS=,; echo "${dirs[*]}") >"$OUT/$set.txt"
 }
 

@@ -16,7 +16,8 @@
 # Usage: scripts/train_default_model.sh [WORK_DIR]
 #   environment: UMVS, STEPS (6000), THREADS (2), SEED (1), SCENES_PER_RECIPE (8), TEXTURES
 #   (installed | DIR[,DIR] | none), DEVICE (cpu | cuda), WIDTH x HEIGHT, NUM_DEPTH (160 x 128, 32),
-#   BATCH (1), INIT (start from this checkpoint instead of random weights), MAX_MINUTES (0: none)
+#   BATCH (1), INIT (start from this checkpoint instead of random weights), MAX_MINUTES (0: none),
+#   RENDER_JOBS (scenes rendered at once, 1)
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
@@ -45,7 +46,7 @@ export OPENBLAS_NUM_THREADS=1
 
 # Training scenes (seeds 1000..) and held-out scenes (seeds 5000.., never trained on), rendered at
 # 320x256; training zooms, crops and scales them to WIDTH x HEIGHT.
-UMVS="$UMVS" TEXTURES="$TEXTURES" WIDTH=320 HEIGHT=256 THREADS="$THREADS" \
+UMVS="$UMVS" TEXTURES="$TEXTURES" WIDTH=320 HEIGHT=256 THREADS="$THREADS" JOBS="${RENDER_JOBS:-1}" \
   bash "$here/render_training_scenes.sh" "$WORK/data/rendered" "$SCENES_PER_RECIPE" 1
 supervised_list="$(cat "$WORK/data/rendered/train.txt")"
 val_list="$(cat "$WORK/data/rendered/heldout.txt")"
