@@ -46,7 +46,8 @@ export OPENBLAS_NUM_THREADS=1
 
 # Training scenes (seeds 1000..) and held-out scenes (seeds 5000.., never trained on), rendered at
 # 320x256; training zooms, crops and scales them to WIDTH x HEIGHT.
-UMVS="$UMVS" TEXTURES="$TEXTURES" WIDTH=320 HEIGHT=256 THREADS="$THREADS" JOBS="${RENDER_JOBS:-1}" \
+RENDER_JOBS="${RENDER_JOBS:-1}"
+UMVS="$UMVS" TEXTURES="$TEXTURES" WIDTH=320 HEIGHT=256 JOBS="$RENDER_JOBS" THREADS=$((RENDER_JOBS > 1 ? 1 : THREADS)) \
   bash "$here/render_training_scenes.sh" "$WORK/data/rendered" "$SCENES_PER_RECIPE" 1
 supervised_list="$(cat "$WORK/data/rendered/train.txt")"
 val_list="$(cat "$WORK/data/rendered/heldout.txt")"
