@@ -4,6 +4,7 @@
 #include <ATen/Parallel.h>
 #include <ATen/ops/constant_pad_nd.h>
 #include <ATen/ops/mkldnn_convolution.h>
+#include <torch/version.h>
 #include <torch/nn/modules/batchnorm.h>
 #include <torch/nn/modules/conv.h>
 #include <torch/utils.h>
@@ -59,7 +60,12 @@ struct SubPixelDeconv {
 
 int64_t first(const torch::ExpandingArray<3>& a) { return (*a)[0]; }
 int64_t first(const torch::nn::detail::conv_padding_t<3>& padding) {
+  // The padding variant is a c10::variant up to LibTorch 2.0 and a std::variant from 2.1 on.
+#if TORCH_VERSION_MAJOR > 2 || (TORCH_VERSION_MAJOR == 2 && TORCH_VERSION_MINOR >= 1)
+  return first(std::get<torch::ExpandingArray<3>>(padding));
+#else
   return first(c10::get<torch::ExpandingArray<3>>(padding));
+#endif
 }
 
 FoldedConv fold(const torch::nn::Conv3dImpl& conv, const torch::nn::BatchNorm3dImpl* bn) {
