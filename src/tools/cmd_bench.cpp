@@ -151,7 +151,7 @@ UMVS_COMMAND(bench, "time and memory of the network on synthetic input") {
                   "Times forward passes of MVSNet on random images (random weights unless --checkpoint):\n"
                   "median/min/max seconds per depth map over --runs runs after --warmup runs, achieved\n"
                   "GFLOP/s (convolutions), the median time of each stage (fast path), minor page faults per\n"
-                  "run and peak memory (process RSS on CPU, allocator peak on CUDA). --path both interleaves\n"
+                  "run and peak memory (the process's peak RSS, host memory also on CUDA). --path both interleaves\n"
                   "the inference path and the autograd (training) path and reports both and their ratio.");
   args.option("case", "network", "what to time: network | fusion")
       .option("width", "640", "image width (multiple of 32)")
