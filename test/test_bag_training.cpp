@@ -1,10 +1,13 @@
 // Training tuples from rosbags (io/bag_training_data.h) and `umvs train --bag`, on a synthetic
 // room logged with BagWriter.
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 #include <torch/torch.h>
 
 #include <cstdlib>
 #include <fstream>
+#include <iterator>
+#include <map>
 #include <sstream>
 
 #include "test_util.h"
@@ -175,12 +178,8 @@ TEST(BagTraining, UnusableInputIsRefusedWithTheReason) {
   const auto& room = logged_room();
   auto config = room_config();
   config.topics.image = "/wrong/image";
-  try {
-    umvs::read_bag_keyframes({room.bag}, config);
-    FAIL() << "expected an error";
-  } catch (const std::runtime_error& e) {
-    EXPECT_NE(std::string(e.what()).find("/wrong/image"), std::string::npos) << e.what();
-  }
+  EXPECT_THAT([&] { umvs::read_bag_keyframes({room.bag}, config); },
+              testing::ThrowsMessage<std::runtime_error>(testing::HasSubstr("/wrong/image")));
   config = room_config();
   config.depth_max = config.depth_min;
   EXPECT_THROW(umvs::read_bag_keyframes({room.bag}, config), std::invalid_argument);
@@ -238,6 +237,69 @@ TEST(BagTraining, UmvsTrainOnABagWritesModelsAndEvaluatesHeldOutKeyframes) {
   // Same held-out keyframes, same model (best.pt is the only checkpoint): the validation of the
   // last step and --eval-only agree.
   EXPECT_NEAR(std::stod(f[2]), val_photometric, 1e-4 * val_photometric);
+}
+
+// The trainer node hands `umvs train` the keyframe_selector's settings as
+// keyframe_stream_train_args(): the tool must then keep exactly the keyframes that the library
+// reader (the selector's policy, KeyframeBuffer) keeps with those settings, and other settings
+// must give other keyframes (the arguments are not ignored).
+TEST(BagTraining, UmvsTrainReadsTheBagWithTheSelectorSettingsItIsGiven) {
+  const auto& room = logged_room();
+  const std::string out = umvs::test::temp_dir("bag_stream_args");
+  auto keyframes_reported = [&](const std::vector<std::string>& stream_args, const std::string& name) {
+    std::string cmd = umvs::test::umvs_binary() + " train --bag " + room.bag + " --holdout-every 0";
+    for (const auto& a : stream_args) cmd += " " + a;
+    cmd += " --width 64 --height 64 --num-depth 8 --steps 0 --threads 1 --out " + out + "/" + name + " > " + out +
+           "/" + name + ".txt 2>&1";
+    EXPECT_EQ(std::system(cmd.c_str()), 0) << cmd;
+    std::ifstream f(out + "/" + name + ".txt");
+    const std::string text((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+    const auto at = text.find(" keyframes (0 held out)");
+    EXPECT_NE(at, std::string::npos) << text;
+    if (at == std::string::npos) return -1;
+    const auto start = text.rfind(' ', at - 1) + 1;
+    return std::stoi(text.substr(start, at - start));
+  };
+  umvs::BagDataConfig coarse = room_config();
+  coarse.holdout_every = 0;
+  coarse.keyframes.min_translation = 0.3;
+  coarse.keyframes.min_rotation_deg = 25.0;
+  umvs::BagDataConfig fine = coarse;
+  fine.keyframes.min_translation = 0.05;
+  fine.keyframes.min_rotation_deg = 5.0;
+  const size_t coarse_expected = umvs::read_bag_keyframes({room.bag}, coarse).size();
+  const size_t fine_expected = umvs::read_bag_keyframes({room.bag}, fine).size();
+  ASSERT_LT(coarse_expected, fine_expected) << "the two settings must keep different keyframes";
+  EXPECT_EQ(keyframes_reported(umvs::keyframe_stream_train_args(coarse), "coarse"), static_cast<int>(coarse_expected));
+  EXPECT_EQ(keyframes_reported(umvs::keyframe_stream_train_args(fine), "fine"), static_cast<int>(fine_expected));
+}
+
+// Every field of the stream config survives the trip through the command line.
+TEST(BagTraining, KeyframeStreamArgumentsCarryEveryField) {
+  umvs::KeyframeStreamConfig c;
+  c.rectified = false;
+  c.keyframes.min_translation = 0.123456789;
+  c.keyframes.min_rotation_deg = 7.5;
+  c.keyframes.min_pose_distance = 0.2;
+  c.keyframes.buffer_size = 12;
+  c.keyframes.min_score = 0.25;
+  c.keyframes.score_grid = 9;
+  c.depth_min = 0.45;
+  c.depth_max = 12.5;
+  const auto args = umvs::keyframe_stream_train_args(c);
+  std::map<std::string, std::string> v;
+  ASSERT_EQ(args.size() % 2, 0u);
+  for (size_t i = 0; i < args.size(); i += 2) v[args[i]] = args[i + 1];
+  EXPECT_EQ(v.at("--rectified"), "0");
+  EXPECT_DOUBLE_EQ(std::stod(v.at("--min-translation")), 0.123456789);
+  EXPECT_DOUBLE_EQ(std::stod(v.at("--min-rotation-deg")), 7.5);
+  EXPECT_DOUBLE_EQ(std::stod(v.at("--min-pose-distance")), 0.2);
+  EXPECT_EQ(v.at("--keyframe-buffer"), "12");
+  EXPECT_DOUBLE_EQ(std::stod(v.at("--min-view-score")), 0.25);
+  EXPECT_EQ(v.at("--view-score-grid"), "9");
+  EXPECT_DOUBLE_EQ(std::stod(v.at("--depth-min")), 0.45);
+  EXPECT_DOUBLE_EQ(std::stod(v.at("--depth-max")), 12.5);
+  EXPECT_EQ(v.size(), 9u);
 }
 
 }  // namespace

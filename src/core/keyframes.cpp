@@ -24,6 +24,14 @@ void KeyframeConfig::validate() const {
   if (!(min_score >= 0)) fail("min_score must be >= 0");
 }
 
+void KeyframeStreamConfig::validate() const {
+  keyframes.validate();
+  if (!(std::isfinite(depth_min) && std::isfinite(depth_max) && depth_min > 0 && depth_max > depth_min)) {
+    throw std::invalid_argument("keyframe stream: need 0 < depth_min < depth_max, got " + std::to_string(depth_min) +
+                                " .. " + std::to_string(depth_max));
+  }
+}
+
 PoseDistance pose_distance(const Camera& a, const Camera& b) {
   const Eigen::Matrix4d rel = a.T_cam_world * b.T_world_cam();  // b's camera frame -> a's
   const Eigen::Matrix3d R = rel.topLeftCorner<3, 3>();

@@ -10,18 +10,32 @@
 namespace umvs {
 
 void BagDataConfig::validate() const {
-  keyframes.validate();
-  if (!(std::isfinite(depth_min) && std::isfinite(depth_max) && depth_min > 0 && depth_max > depth_min)) {
-    std::ostringstream s;
-    s << "the depth range must satisfy 0 < depth_min < depth_max, got " << depth_min << " .. " << depth_max;
-    throw std::invalid_argument(s.str());
-  }
+  KeyframeStreamConfig::validate();
   if (holdout_every < 0 || holdout_every == 1) {
     throw std::invalid_argument("holdout_every must be 0 (none) or >= 2, got " + std::to_string(holdout_every));
   }
   if (topics.image.empty() || topics.camera_info.empty() || topics.world_frame.empty()) {
     throw std::invalid_argument("the image topic, camera_info topic and world frame must not be empty");
   }
+}
+
+std::vector<std::string> keyframe_stream_train_args(const KeyframeStreamConfig& stream) {
+  auto number = [](double v) {
+    std::ostringstream s;
+    s.precision(17);  // round-trips every double
+    s << v;
+    return s.str();
+  };
+  const KeyframeConfig& k = stream.keyframes;
+  return {"--rectified",      stream.rectified ? "1" : "0",
+          "--min-translation", number(k.min_translation),
+          "--min-rotation-deg", number(k.min_rotation_deg),
+          "--min-pose-distance", number(k.min_pose_distance),
+          "--keyframe-buffer", std::to_string(k.buffer_size),
+          "--min-view-score",  number(k.min_score),
+          "--view-score-grid", std::to_string(k.score_grid),
+          "--depth-min",       number(stream.depth_min),
+          "--depth-max",       number(stream.depth_max)};
 }
 
 std::vector<BagKeyframe> read_bag_keyframes(const std::vector<std::string>& bags, const BagDataConfig& config,

@@ -48,9 +48,6 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
     ros::NodeHandle& pnh = getPrivateNodeHandle();
     pnh.param<std::string>("world_frame", world_frame_, "world");
     pnh.param("tf_timeout", tf_timeout_, 0.1);
-    pnh.param("rectified", rectified_, false);
-    pnh.param("depth_min", depth_min_, 0.3);
-    pnh.param("depth_max", depth_max_, 10.0);
     pnh.param("depth_from_estimates", depth_from_estimates_, true);
     int queue_size = 10;
     pnh.param("queue_size", queue_size, queue_size);
@@ -59,11 +56,11 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
     pnh.param("max_image_pixels", max_image_pixels_, kDefaultMaxImagePixels);
     try {
       if (max_image_pixels_ < 1) throw std::invalid_argument("max_image_pixels must be >= 1");
-      buffer_ = std::make_unique<umvs::KeyframeBuffer>(keyframe_config_from_ros(pnh));
-      if (!(depth_min_ > 0 && depth_max_ > depth_min_)) {
-        throw std::invalid_argument("need 0 < depth_min < depth_max, got " + std::to_string(depth_min_) + ", " +
-                                    std::to_string(depth_max_));
-      }
+      const umvs::KeyframeStreamConfig stream = keyframe_stream_config_from_ros(pnh);
+      buffer_ = std::make_unique<umvs::KeyframeBuffer>(stream.keyframes);
+      rectified_ = stream.rectified;
+      depth_min_ = stream.depth_min;
+      depth_max_ = stream.depth_max;
       if (queue_size < 1) throw std::invalid_argument("queue_size must be >= 1");
     } catch (const std::exception& e) {
       NODELET_FATAL("keyframe_selector: invalid parameters: %s", e.what());

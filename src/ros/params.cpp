@@ -28,6 +28,16 @@ umvs::KeyframeConfig keyframe_config_from_ros(const ros::NodeHandle& nh) {
   return c;
 }
 
+umvs::KeyframeStreamConfig keyframe_stream_config_from_ros(const ros::NodeHandle& nh) {
+  umvs::KeyframeStreamConfig c;
+  c.keyframes = keyframe_config_from_ros(nh);
+  nh.param("rectified", c.rectified, c.rectified);
+  nh.param("depth_min", c.depth_min, c.depth_min);
+  nh.param("depth_max", c.depth_max, c.depth_max);
+  c.validate();
+  return c;
+}
+
 umvs::FusionConfig fusion_config_from_ros(const ros::NodeHandle& nh) {
   umvs::FusionConfig c;
   nh.param("min_confidence", c.min_confidence, c.min_confidence);

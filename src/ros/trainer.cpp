@@ -2,13 +2,16 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <ctime>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
 
 #include "unsup_mvs/ReloadModel.h"
+#include "unsup_mvs/io/bag_training_data.h"
 #include "unsup_mvs/io/file_safety.h"
+#include "unsup_mvs/ros/params.h"
 
 namespace umvs_ros {
 
@@ -72,6 +75,17 @@ Trainer::Trainer(ros::NodeHandle nh, ros::NodeHandle pnh) : nh_(nh), pnh_(pnh) {
   world_frame_ = pnh_.param<std::string>("world_frame", "world");
   default_steps_ = pnh_.param("steps", 500);
   pnh_.getParam("train_args", extra_train_args_);
+  // The bags are read as the keyframe_selector reads the live stream: the launch files load its
+  // YAML (and ~rectified) into ~keyframes/ too.
+  keyframe_stream_ = keyframe_stream_config_from_ros(ros::NodeHandle(pnh_, "keyframes"));
+  const auto stream_args = umvs::keyframe_stream_train_args(keyframe_stream_);
+  for (size_t i = 0; i < stream_args.size(); i += 2) {
+    if (std::find(extra_train_args_.begin(), extra_train_args_.end(), stream_args[i]) != extra_train_args_.end()) {
+      ROS_WARN("trainer: ~train_args sets %s, which overrides ~keyframes/ (the keyframe_selector's settings): "
+               "live and offline keyframes may then differ",
+               stream_args[i].c_str());
+    }
+  }
   std::error_code ec;
   fs::create_directories(output_dir_, ec);
   if (ec) ROS_ERROR("trainer: cannot create ~output_dir '%s': %s", output_dir_.c_str(), ec.message().c_str());
@@ -100,6 +114,8 @@ std::vector<std::string> Trainer::data_args() const {
   }
   args.insert(args.end(), {"--image-topic", image_topic_, "--camera-info-topic", camera_info_topic_, "--world-frame",
                            world_frame_});
+  const auto stream_args = umvs::keyframe_stream_train_args(keyframe_stream_);
+  args.insert(args.end(), stream_args.begin(), stream_args.end());
   args.insert(args.end(), extra_train_args_.begin(), extra_train_args_.end());
   return args;
 }

@@ -13,6 +13,11 @@ Args& Args::option(const std::string& name, const std::string& def, const std::s
   order_.push_back(name);
   return *this;
 }
+Args& Args::option(const std::string& name, double def, const std::string& help) {
+  std::ostringstream text;
+  text << def;
+  return option(name, text.str(), help);
+}
 Args& Args::flag(const std::string& name, const std::string& help) {
   specs_[name] = {"", help, true, false, false};
   order_.push_back(name);

@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "unsup_mvs/core/device.h"
+#include "unsup_mvs/core/keyframes.h"
 #include "unsup_mvs/core/memory_bounds.h"
 #include "unsup_mvs/core/training.h"
 #include "unsup_mvs/io/atomic_file.h"
@@ -159,6 +160,10 @@ Data open_bags(const umvs::Args& args, const umvs::TupleConfig& config, bool eva
   bag.rectified = args.integer("rectified") != 0;
   bag.keyframes.min_translation = args.real("min-translation");
   bag.keyframes.min_rotation_deg = args.real("min-rotation-deg");
+  bag.keyframes.min_pose_distance = args.real("min-pose-distance");
+  bag.keyframes.buffer_size = args.integer("keyframe-buffer");
+  bag.keyframes.min_score = args.real("min-view-score");
+  bag.keyframes.score_grid = args.integer("view-score-grid");
   bag.depth_min = args.real("depth-min");
   bag.depth_max = args.real("depth-max");
   bag.holdout_every = args.integer("holdout-every");
@@ -246,6 +251,7 @@ void check_training_options(const umvs::Args& args) {
 }  // namespace
 
 UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photometric loss") {
+  const umvs::KeyframeStreamConfig bag_defaults;
   umvs::Args args(
       "train",
       "Trains MVSNet without ground truth: each step runs the network on a reference and its best\n"
@@ -270,11 +276,22 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
       .option("camera-info-topic", "/camera/camera_info", "--bag: sensor_msgs/CameraInfo topic")
       .option("world-frame", "world", "--bag: fixed tf frame of the camera poses")
       .option("depth-topic", "", "--bag: 32FC1 ground-truth depth topic, only for validation errors (\"\" = none)")
-      .option("rectified", "1", "--bag: 1 = images are rectified (intrinsics from P), 0 = from K")
-      .option("min-translation", "0.10", "--bag: metres between keyframes (as the keyframe_selector)")
-      .option("min-rotation-deg", "10", "--bag: or degrees between keyframes")
-      .option("depth-min", "0.3", "--bag: plane-sweep depth range near bound (m)")
-      .option("depth-max", "10", "--bag: far bound (m)")
+      // The camera stream is read as the keyframe_selector reads it: same options, same defaults.
+      .option("rectified", bag_defaults.rectified ? 1 : 0,
+              "--bag: 1 = images are rectified (intrinsics from P), 0 = from K (keyframe_selector ~rectified)")
+      .option("min-translation", bag_defaults.keyframes.min_translation,
+              "--bag: metres between keyframes (keyframe_selector ~min_translation)")
+      .option("min-rotation-deg", bag_defaults.keyframes.min_rotation_deg, "--bag: or degrees between keyframes")
+      .option("min-pose-distance", bag_defaults.keyframes.min_pose_distance,
+              "--bag: or combined pose distance (0 = off; ~min_pose_distance)")
+      .option("keyframe-buffer", bag_defaults.keyframes.buffer_size,
+              "--bag: keyframes searched for neighbours (~buffer_size)")
+      .option("min-view-score", bag_defaults.keyframes.min_score,
+              "--bag: view-selection score a neighbour needs (~min_view_score)")
+      .option("view-score-grid", bag_defaults.keyframes.score_grid,
+              "--bag: points per side sampled for the score (~view_score_grid)")
+      .option("depth-min", bag_defaults.depth_min, "--bag: plane-sweep depth range near bound (m)")
+      .option("depth-max", bag_defaults.depth_max, "--bag: far bound (m)")
       .option("holdout-every", "5", "--bag: hold out every k-th keyframe for validation (0 = none)")
       .option("out", "", "output folder (required unless --eval-only)")
       .option("init", "", "start from this checkpoint (ours or MVSNet_pytorch weights); default random")

@@ -33,6 +33,19 @@ struct KeyframeConfig {
   void validate() const;
 };
 
+// How a calibrated, posed camera stream is read into keyframes: the one definition (and the one
+// set of defaults) shared by the live keyframe_selector and by training on recorded bags
+// (`umvs train --bag`, the trainer node), so that both see the same intrinsics and keyframes.
+struct KeyframeStreamConfig {
+  KeyframeConfig keyframes;
+  bool rectified = true;    // intrinsics from CameraInfo P (a rectified image_rect* topic) or from K
+  double depth_min = 0.3;   // metres: the plane-sweep range (live: until depth estimates narrow it)
+  double depth_max = 10.0;
+
+  // Throws std::invalid_argument naming the bad field.
+  void validate() const;
+};
+
 struct PoseDistance {
   double translation = 0.0;   // metres
   double rotation_deg = 0.0;  // angle of the relative rotation

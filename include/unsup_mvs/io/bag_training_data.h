@@ -20,15 +20,18 @@
 
 namespace umvs {
 
-struct BagDataConfig {
+// A bag's training data: the camera stream read exactly as the live keyframe_selector reads it
+// (KeyframeStreamConfig: intrinsics, keyframe policy, neighbours' min_score / score_grid, depth
+// range of every tuple), plus where the messages are and which keyframes are held out.
+struct BagDataConfig : KeyframeStreamConfig {
   BagTopics topics;
-  bool rectified = true;       // as in camera_from_info: intrinsics from P (true) or K
-  KeyframeConfig keyframes;    // when a frame becomes a keyframe, and min_score / score_grid for neighbours
-  double depth_min = 0.3;      // metres: the plane-sweep range of every tuple (the selector's defaults)
-  double depth_max = 10.0;
   int holdout_every = 5;       // keyframes 4, 9, 14, ... of each bag are held out; 0 = none
   void validate() const;       // throws std::invalid_argument naming the field
 };
+
+// The `umvs train --bag` options that make it read a bag with `stream` (written by the trainer
+// node, parsed by umvs train; a test runs them through `umvs train`).
+std::vector<std::string> keyframe_stream_train_args(const KeyframeStreamConfig& stream);
 
 struct BagKeyframe {
   size_t bag = 0;        // index into the bag list

@@ -20,6 +20,10 @@ constexpr int kDefaultMaxImagePixels = 4096 * 4096;
 std::string ros_home();
 
 umvs::KeyframeConfig keyframe_config_from_ros(const ros::NodeHandle& nh);
+// The keyframe policy plus ~rectified, ~depth_min, ~depth_max, defaults from KeyframeStreamConfig:
+// read by the keyframe_selector from its namespace and by the trainer from its ~keyframes/ (the
+// launch files load the same YAML into both).
+umvs::KeyframeStreamConfig keyframe_stream_config_from_ros(const ros::NodeHandle& nh);
 umvs::FusionConfig fusion_config_from_ros(const ros::NodeHandle& nh);
 
 }  // namespace umvs_ros

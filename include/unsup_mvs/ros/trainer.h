@@ -20,6 +20,7 @@
 
 #include "unsup_mvs/FineTune.h"
 #include "unsup_mvs/TrainingProgress.h"
+#include "unsup_mvs/core/keyframes.h"
 #include "unsup_mvs/io/child_process.h"
 
 namespace umvs_ros {
@@ -58,6 +59,7 @@ class Trainer {
   std::string image_topic_, camera_info_topic_, world_frame_;
   int default_steps_ = 500;
   std::vector<std::string> extra_train_args_;
+  umvs::KeyframeStreamConfig keyframe_stream_;  // ~keyframes/: how umvs train reads the bags
 
   // the current job
   Phase phase_ = Phase::kIdle;

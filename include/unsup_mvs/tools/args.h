@@ -15,6 +15,9 @@ class Args {
 
   // Declare options before parse(). `help` appears in the usage text.
   Args& option(const std::string& name, const std::string& default_value, const std::string& help);
+  // A numeric default, usually a Config struct's own field, so that the command line and the
+  // library cannot disagree on it.
+  Args& option(const std::string& name, double default_value, const std::string& help);
   Args& flag(const std::string& name, const std::string& help);
   Args& required(const std::string& name, const std::string& help);
   // An option that may be given several times (e.g. --bag a.bag --bag b.bag).
