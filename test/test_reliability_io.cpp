@@ -2,6 +2,7 @@
 // writes"): links planted where a write goes, paths that leave their folder, FIFOs and devices
 // where a model file should be, leftovers of interrupted writes, a parent killed under its child.
 #include <fcntl.h>
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <sys/stat.h>
@@ -17,6 +18,7 @@
 #include "unsup_mvs/io/atomic_file.h"
 #include "unsup_mvs/io/child_process.h"
 #include "unsup_mvs/io/file_safety.h"
+#include "unsup_mvs/io/input_limits.h"
 
 namespace umvs {
 namespace {
@@ -58,12 +60,8 @@ TEST(AtomicWrite, RefusesALinkOrFolderAtTheFinalName) {
   const auto dir = test::temp_dir("atomic_planted_final");
   write_text(dir + "/victim.txt", "precious");
   fs::create_symlink(dir + "/victim.txt", dir + "/x.ply");
-  try {
-    write_hello(dir + "/x.ply");
-    FAIL() << "a symlink at the final name was replaced";
-  } catch (const std::runtime_error& e) {
-    EXPECT_NE(std::string(e.what()).find("is a symbolic link; refusing to replace it"), std::string::npos) << e.what();
-  }
+  EXPECT_THAT([&] { write_hello(dir + "/x.ply"); },
+              testing::ThrowsMessage<std::runtime_error>(testing::HasSubstr("is a symbolic link; refusing to replace it")));
   EXPECT_TRUE(fs::is_symlink(dir + "/x.ply"));
   EXPECT_EQ(read_text(dir + "/victim.txt"), "precious");
   fs::create_directories(dir + "/folder.ply");
@@ -94,12 +92,9 @@ TEST(CopyFileToNewName, NeverReplacesAFileOrALink) {
   fs::create_symlink(dir + "/served.pt", dir + "/link.pt");
   fs::create_symlink(dir + "/nowhere.pt", dir + "/dangling.pt");
   for (const char* taken : {"/served.pt", "/link.pt", "/dangling.pt"}) {
-    try {
-      copy_file_to_new_name(dir + "/new.pt", dir + taken);
-      FAIL() << taken << " was replaced";
-    } catch (const std::runtime_error& e) {
-      EXPECT_NE(std::string(e.what()).find("already exists; refusing to replace it"), std::string::npos) << e.what();
-    }
+    EXPECT_THAT([&] { copy_file_to_new_name(dir + "/new.pt", dir + taken); },
+                testing::ThrowsMessage<std::runtime_error>(testing::HasSubstr("already exists; refusing to replace it")))
+        << taken;
   }
   EXPECT_EQ(read_text(dir + "/served.pt"), "served model");
   EXPECT_FALSE(fs::exists(dir + "/nowhere.pt"));
@@ -118,18 +113,14 @@ TEST(PathInside, DotDotAndLinksCannotLeaveTheFolder) {
   for (const std::string& bad : {std::string("out/../../outside/x.ply"), std::string("escape/x.ply"),
                                  dir + "/outside/x.ply", std::string("/etc/passwd"), std::string("."),
                                  std::string("")}) {
-    try {
-      resolve_inside(dir + "/save", bad);
-      FAIL() << "'" << bad << "' was accepted";
-    } catch (const std::invalid_argument& e) {
-      if (!bad.empty()) {
-        EXPECT_NE(std::string(e.what()).find("outside the allowed folder"), std::string::npos) << e.what();
-      }
-    }
+    EXPECT_THAT([&] { resolve_inside(dir + "/save", bad); },
+                testing::ThrowsMessage<std::invalid_argument>(
+                    testing::HasSubstr(bad.empty() ? "empty path" : "outside the allowed folder")))
+        << "'" << bad << "'";
   }
 }
 
-TEST(RegularFileSize, RefusesFifosDevicesFoldersAndHugeFilesWithoutBlocking) {
+TEST(CheckedFileSize, RefusesFifosDevicesFoldersAndHugeFilesWithoutBlocking) {
   const auto dir = test::temp_dir("regular");
   ASSERT_EQ(::mkfifo((dir + "/fifo.pt").c_str(), 0600), 0);
   write_text(dir + "/small.pt", "12345");
@@ -137,14 +128,11 @@ TEST(RegularFileSize, RefusesFifosDevicesFoldersAndHugeFilesWithoutBlocking) {
     std::ofstream big(dir + "/big.pt");
   }
   fs::resize_file(dir + "/big.pt", 3u << 20);  // sparse: 3 MiB claimed, nothing written
-  EXPECT_EQ(regular_file_size(dir + "/small.pt", 5), 5u);
+  EXPECT_EQ(checked_file_size(dir + "/small.pt", 5, "checkpoint"), 5u);
   auto refused = [&](const std::string& path, uint64_t limit, const std::string& why) {
-    try {
-      regular_file_size(path, limit);
-      ADD_FAILURE() << path << " accepted";
-    } catch (const std::runtime_error& e) {
-      EXPECT_NE(std::string(e.what()).find(why), std::string::npos) << e.what();
-    }
+    EXPECT_THAT([&] { checked_file_size(path, limit, "checkpoint"); },
+                testing::ThrowsMessage<std::runtime_error>(testing::HasSubstr(why)))
+        << path;
   };
   const auto t0 = std::chrono::steady_clock::now();
   refused(dir + "/fifo.pt", 1 << 30, "is a FIFO, not a regular file");  // no writer: a blocking open would hang

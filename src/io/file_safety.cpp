@@ -115,26 +115,6 @@ std::string resolve_inside(const std::string& dir, const std::string& requested)
   return p.lexically_normal().string();
 }
 
-uint64_t regular_file_size(const std::string& path, uint64_t max_bytes) {
-  const Fd fd(::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK | O_NOCTTY));
-  if (fd.get() < 0) throw std::runtime_error("cannot open '" + path + "': " + errno_text());
-  struct stat st;
-  if (::fstat(fd.get(), &st) != 0) throw std::runtime_error("cannot stat '" + path + "': " + errno_text());
-  if (!S_ISREG(st.st_mode)) {
-    const char* kind = S_ISFIFO(st.st_mode) ? "a FIFO" : S_ISCHR(st.st_mode) || S_ISBLK(st.st_mode) ? "a device"
-                       : S_ISDIR(st.st_mode)                                   ? "a folder"
-                       : S_ISSOCK(st.st_mode)                                  ? "a socket"
-                                                                                : "not a regular file";
-    throw std::runtime_error("'" + path + "' is " + kind + ", not a regular file");
-  }
-  const auto size = static_cast<uint64_t>(st.st_size);
-  if (size > max_bytes) {
-    throw std::runtime_error("'" + path + "' is " + std::to_string(size) + " bytes, more than the limit of " +
-                             std::to_string(max_bytes));
-  }
-  return size;
-}
-
 int remove_stale_temp_files(const std::string& dir) {
   int removed = 0;
   std::error_code walk_ec;

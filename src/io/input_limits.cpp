@@ -1,6 +1,8 @@
 #include "unsup_mvs/io/input_limits.h"
 
+#include <fcntl.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <array>
@@ -52,19 +54,26 @@ struct Reader {
 }  // namespace
 
 uint64_t checked_file_size(const std::string& path, uint64_t max_bytes, const std::string& what) {
+  // Opened without blocking, so that a FIFO or a device is refused instead of waited on.
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK | O_NOCTTY);
+  if (fd < 0) throw std::runtime_error("cannot open " + what + " '" + path + "': " + std::strerror(errno));
   struct stat st{};
-  if (::stat(path.c_str(), &st) != 0) {
-    throw std::runtime_error(what + " '" + path + "': " + std::strerror(errno));
-  }
+  const int rc = ::fstat(fd, &st);
+  const int stat_errno = errno;
+  ::close(fd);
+  if (rc != 0) throw std::runtime_error("cannot stat " + what + " '" + path + "': " + std::strerror(stat_errno));
   if (!S_ISREG(st.st_mode)) {
-    const char* kind = S_ISDIR(st.st_mode) ? "a folder" : S_ISFIFO(st.st_mode) ? "a FIFO" :
-                       S_ISCHR(st.st_mode) || S_ISBLK(st.st_mode) ? "a device" : "not a regular file";
+    const char* kind = S_ISDIR(st.st_mode)                          ? "a folder"
+                       : S_ISFIFO(st.st_mode)                       ? "a FIFO"
+                       : S_ISCHR(st.st_mode) || S_ISBLK(st.st_mode) ? "a device"
+                       : S_ISSOCK(st.st_mode)                       ? "a socket"
+                                                                    : "not a regular file";
     throw std::runtime_error(what + " '" + path + "' is " + kind + ", not a regular file");
   }
   const uint64_t size = static_cast<uint64_t>(st.st_size);
   if (size > max_bytes) {
-    throw std::runtime_error(what + " '" + path + "' has " + std::to_string(size) + " bytes, more than the " + mib(max_bytes) +
-                             " this program accepts (docs/reliability.md)");
+    throw std::runtime_error(what + " '" + path + "' is " + std::to_string(size) + " bytes, more than the limit of " +
+                             std::to_string(max_bytes) + " (" + mib(max_bytes) + ", docs/reliability.md)");
   }
   return size;
 }

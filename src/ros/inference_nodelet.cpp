@@ -25,6 +25,7 @@
 #include "unsup_mvs/io/bag_messages.h"
 #include "unsup_mvs/io/checkpoint.h"
 #include "unsup_mvs/io/file_safety.h"
+#include "unsup_mvs/io/input_limits.h"
 #include "unsup_mvs/ros/nodelets.h"
 #include "unsup_mvs/ros/params.h"
 
@@ -72,7 +73,8 @@ class InferenceNodelet : public nodelet::Nodelet {
     pnh.param("num_depth", config_.num_depth, 0);
     pnh.param("max_width", config_.max_width, 640);
     pnh.param("max_height", config_.max_height, 512);
-    pnh.param("rectified", rectified_, false);
+    // As the keyframe_selector reads the same CameraInfo (same parameter, same default).
+    pnh.param("rectified", rectified_, umvs::KeyframeStreamConfig{}.rectified);
     pnh.param<std::string>("checkpoint", checkpoint_, "");
     pnh.param("max_image_pixels", max_image_pixels_, kDefaultMaxImagePixels);
     pnh.param("max_views", max_views_, 16);
@@ -268,7 +270,7 @@ class InferenceNodelet : public nodelet::Nodelet {
   // no member: it may outlive the nodelet on an abandoned reload.
   static Candidate loadCandidate(const std::string& path, const torch::Device& device,
                                  const umvs::DepthEstimatorConfig& config, uint64_t max_bytes, int max_planes) {
-    umvs::regular_file_size(path, max_bytes);  // before reading: no FIFO, device or huge file
+    umvs::checked_file_size(path, max_bytes, "checkpoint");  // before reading: no FIFO, device or huge file
     umvs::LoadedModel loaded = umvs::load_model(path, device);
     Candidate c;
     c.estimator = std::make_unique<umvs::DepthEstimator>(loaded.model, device, config);

@@ -29,10 +29,6 @@ bool path_inside(const std::string& path, const std::string& dir);
 // std::invalid_argument saying why it is refused.
 std::string resolve_inside(const std::string& dir, const std::string& requested);
 
-// Size of the regular file at `path` (links are followed). Opens it without blocking, so a FIFO
-// or a device is refused instead of waited on. Throws std::runtime_error naming the file when it
-// is missing, unreadable, not a regular file, or larger than `max_bytes`.
-uint64_t regular_file_size(const std::string& path, uint64_t max_bytes);
 
 // Removes the "*.tmp-*" files that interrupted writes left in `dir` and its sub-folders (links to
 // folders are not followed). Only call it when no writer can be active there. Returns the count.

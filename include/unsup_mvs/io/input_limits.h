@@ -18,8 +18,10 @@ constexpr uint64_t kMaxImageFileBytes = 512 * kMiB;   // one encoded image
 constexpr uint64_t kMaxTextFileBytes = 256 * kMiB;    // a cam file or pair.txt
 constexpr int64_t kMaxImagePixels = int64_t{64} << 20;  // 8192 x 8192: 192 MiB as RGB8, 768 MiB as float
 
-// Size of the regular file at `path`. Throws std::runtime_error naming `what` and the path when it
-// is missing, not a regular file (a FIFO, a device, a folder) or larger than `max_bytes`.
+// Size of the regular file at `path` (links are followed). Opens it without blocking, so a FIFO or
+// a device is refused instead of waited on. Throws std::runtime_error naming `what` and the path
+// when it is missing, unreadable, not a regular file (a FIFO, a device, a folder) or larger than
+// `max_bytes`. Every reader of user files checks with this first.
 uint64_t checked_file_size(const std::string& path, uint64_t max_bytes, const std::string& what);
 
 // The whole file, after checked_file_size.
