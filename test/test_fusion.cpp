@@ -1,6 +1,7 @@
 // Depth-map fusion on an analytic scene: a ground plane z = 0 with a sphere on it, seen by a ring
 // of cameras. Ground-truth depth maps are ray-cast here, so every fused point can be checked
 // against the exact surface.
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 #include <torch/torch.h>
 
@@ -17,20 +18,9 @@ const Eigen::Vector3d kSphereCentre(0.0, 0.0, 0.3);
 const double kSphereRadius = 0.3;
 
 Camera look_at(const Eigen::Vector3d& centre, const Eigen::Vector3d& target, int w = 64, int h = 48) {
-  Camera c;
-  c.width = w;
-  c.height = h;
-  c.K << 60, 0, (w - 1) / 2.0, 0, 60, (h - 1) / 2.0, 0, 0, 1;
-  const Eigen::Vector3d f = (target - centre).normalized();
-  const Eigen::Vector3d r = f.cross(Eigen::Vector3d::UnitZ()).normalized();
-  const Eigen::Vector3d d = f.cross(r);
-  Eigen::Matrix3d R;
-  R.row(0) = r;
-  R.row(1) = d;
-  R.row(2) = f;
-  c.T_cam_world.topLeftCorner<3, 3>() = R;
-  c.T_cam_world.topRightCorner<3, 1>() = -R * centre;
-  return c;
+  Eigen::Matrix3d K;
+  K << 60, 0, (w - 1) / 2.0, 0, 60, (h - 1) / 2.0, 0, 0, 1;
+  return Camera::look_at(centre, target, K, w, h);
 }
 
 // z-depth of the nearest surface (plane or sphere) for every pixel.  -> [H,W] float32
@@ -285,12 +275,8 @@ TEST(DepthFusion, VoxelGridRemovesDuplicates) {
 TEST(DepthFusion, RejectsBadInput) {
   auto views = ring_views(3);
   views[1].camera.width = 32;
-  try {
-    DepthFusion(FusionConfig{}, torch::kCPU).fuse(views);
-    FAIL() << "expected an error";
-  } catch (const std::invalid_argument& e) {
-    EXPECT_NE(std::string(e.what()).find("view 1"), std::string::npos) << e.what();
-  }
+  EXPECT_THAT([&] { DepthFusion(FusionConfig{}, torch::kCPU).fuse(views); },
+              testing::ThrowsMessage<std::invalid_argument>(testing::HasSubstr("view 1")));
   views = ring_views(3);
   EXPECT_THROW(DepthFusion(FusionConfig{}, torch::kCPU).fuse(views, {{1}, {0}}), std::invalid_argument);
   EXPECT_THROW(DepthFusion(FusionConfig{}, torch::kCPU).fuse(views, {{0}, {0}, {0}}), std::invalid_argument);

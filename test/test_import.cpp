@@ -1,4 +1,5 @@
 // Importers of real data sets (Middlebury multi-view, RGB-D sequences) into MVSNet folders.
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 #include <torch/torch.h>
 
@@ -20,13 +21,7 @@ namespace fs = std::filesystem;
 
 // World-to-camera rotation of a camera at `eye` looking at `target` (z up in the world).
 Eigen::Matrix3d look_at_rotation(const Eigen::Vector3d& eye, const Eigen::Vector3d& target) {
-  const Eigen::Vector3d f = (target - eye).normalized();
-  const Eigen::Vector3d r = f.cross(Eigen::Vector3d::UnitZ()).normalized();
-  Eigen::Matrix3d R;
-  R.row(0) = r;
-  R.row(1) = f.cross(r);
-  R.row(2) = f;
-  return R;
+  return Camera::look_at(eye, target, Eigen::Matrix3d::Identity(), 1, 1).R();
 }
 
 TEST(ImportMiddlebury, ParsesTheBoundingBoxOfTheReadme) {
@@ -105,12 +100,8 @@ TEST(ImportMiddlebury, MalformedCalibrationNamesTheFile) {
   MiddleburyImportConfig cfg;
   cfg.data_dir = root;
   cfg.out_dir = root + "/out";
-  try {
-    import_middlebury(cfg);
-    FAIL() << "expected an error";
-  } catch (const std::runtime_error& e) {
-    EXPECT_NE(std::string(e.what()).find("x_par.txt"), std::string::npos) << e.what();
-  }
+  EXPECT_THAT([&] { import_middlebury(cfg); },
+              testing::ThrowsMessage<std::runtime_error>(testing::HasSubstr("x_par.txt")));
   EXPECT_FALSE(fs::exists(root + "/out/pair.txt"));
 }
 
@@ -159,12 +150,8 @@ TEST(ImportRgbd, BadPoseNamesTheLine) {
   RgbdImportConfig cfg;
   cfg.data_dir = root;
   cfg.out_dir = root + "/out";
-  try {
-    import_rgbd(cfg);
-    FAIL() << "expected an error";
-  } catch (const std::runtime_error& e) {
-    EXPECT_NE(std::string(e.what()).find("line 2"), std::string::npos) << e.what();
-  }
+  EXPECT_THAT([&] { import_rgbd(cfg); },
+              testing::ThrowsMessage<std::runtime_error>(testing::HasSubstr("line 2")));
 }
 
 TEST(ImportRealData, TempleRing) {

@@ -42,6 +42,29 @@ bool Camera::in_image(const Eigen::Vector2d& uv, double border) const {
          uv.y() <= height - 0.5 - border;
 }
 
+Camera Camera::look_at(const Eigen::Vector3d& eye, const Eigen::Vector3d& target, const Eigen::Matrix3d& K,
+                       int width, int height, const Eigen::Vector3d& up) {
+  const Eigen::Vector3d z = (target - eye).normalized();
+  Eigen::Vector3d x = z.cross(up.normalized());
+  if (x.norm() < 1e-6) {  // looking along `up`
+    const Eigen::Vector3d axis = std::abs(z.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
+    x = axis - axis.dot(z) * z;
+  }
+  x.normalize();
+  Camera cam;
+  cam.width = width;
+  cam.height = height;
+  cam.K = K;
+  Eigen::Matrix3d R;
+  R.row(0) = x.transpose();
+  R.row(1) = z.cross(x).transpose();
+  R.row(2) = z.transpose();
+  cam.T_cam_world.setIdentity();
+  cam.T_cam_world.topLeftCorner<3, 3>() = R;
+  cam.T_cam_world.topRightCorner<3, 1>() = -R * eye;
+  return cam;
+}
+
 Camera Camera::resized(int new_width, int new_height) const {
   if (width <= 0 || height <= 0) throw std::invalid_argument("Camera::resized: camera has no image size");
   const double sx = static_cast<double>(new_width) / width;

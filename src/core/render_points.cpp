@@ -65,22 +65,9 @@ Camera orbit_camera(const PointCloud& cloud, int width, int height, double azimu
   const double f = 0.5 * width / std::tan(0.5 * fov_deg * M_PI / 180.0);
   const double distance = radius * f / (0.5 * std::min(width, height)) * 1.05;
   const Eigen::Vector3d eye = centre + distance * dir;
-  const Eigen::Vector3d forward = (centre - eye).normalized();
-  Eigen::Vector3d right = forward.cross(up);
-  if (right.norm() < 1e-9) right = forward.unitOrthogonal();
-  right.normalize();
-  const Eigen::Vector3d down = forward.cross(right);
-  Camera cam;
-  cam.width = width;
-  cam.height = height;
-  cam.K << f, 0, (width - 1) / 2.0, 0, f, (height - 1) / 2.0, 0, 0, 1;
-  Eigen::Matrix3d R;
-  R.row(0) = right;
-  R.row(1) = down;
-  R.row(2) = forward;
-  cam.T_cam_world.topLeftCorner<3, 3>() = R;
-  cam.T_cam_world.topRightCorner<3, 1>() = -R * eye;
-  return cam;
+  Eigen::Matrix3d K;
+  K << f, 0, (width - 1) / 2.0, 0, f, (height - 1) / 2.0, 0, 0, 1;
+  return Camera::look_at(eye, centre, K, width, height, up);
 }
 
 }  // namespace umvs

@@ -870,23 +870,9 @@ SceneDef corridor_scene(Rng& rng) {
 // Cameras.
 
 Camera look_at(const Vec3& eye, const Vec3& target, int width, int height, double focal) {
-  const Vec3 z = (target - eye).normalized();
-  Vec3 x = z.cross(Vec3::UnitZ());
-  if (x.norm() < 1e-6) x = Vec3::UnitX();  // looking straight up or down
-  x.normalize();
-  const Vec3 y = z.cross(x);
-  Camera cam;
-  cam.width = width;
-  cam.height = height;
-  cam.K << focal * width, 0, (width - 1) / 2.0, 0, focal * width, (height - 1) / 2.0, 0, 0, 1;
-  Mat3 R;
-  R.row(0) = x.transpose();
-  R.row(1) = y.transpose();
-  R.row(2) = z.transpose();
-  cam.T_cam_world.setIdentity();
-  cam.T_cam_world.topLeftCorner<3, 3>() = R;
-  cam.T_cam_world.topRightCorner<3, 1>() = -R * eye;
-  return cam;
+  Mat3 K;
+  K << focal * width, 0, (width - 1) / 2.0, 0, focal * width, (height - 1) / 2.0, 0, 0, 1;
+  return Camera::look_at(eye, target, K, width, height);
 }
 
 bool inside_any(const std::vector<Primitive>& prims, const Vec3& x, double margin) {

@@ -34,6 +34,12 @@ struct Camera {
   Eigen::Vector3d backproject(double u, double v, double depth) const;
   bool in_image(const Eigen::Vector2d& uv, double border = 0.0) const;
 
+  // A camera at `eye` looking at `target` (optical frame as REP 103: x right, y down, z forward),
+  // with the image's x axis along forward x up, so that `up` points up in the image. When forward
+  // is parallel to `up`, x is the world x axis (or y) made orthogonal to forward.
+  static Camera look_at(const Eigen::Vector3d& eye, const Eigen::Vector3d& target, const Eigen::Matrix3d& K,
+                        int width, int height, const Eigen::Vector3d& up = Eigen::Vector3d::UnitZ());
+
   // The same camera for an image resized to new_width x new_height (pixel centres are mapped,
   // so cx' = (cx + 0.5) * sx - 0.5).
   Camera resized(int new_width, int new_height) const;
