@@ -1,3 +1,4 @@
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 #include <torch/torch.h>
 
@@ -7,6 +8,7 @@
 #include "unsup_mvs/io/array_io.h"
 #include "unsup_mvs/io/checkpoint.h"
 #include "unsup_mvs/io/image_io.h"
+#include "unsup_mvs/io/inference_folder.h"
 #include "unsup_mvs/io/mvs_folder.h"
 #include "unsup_mvs/io/ply.h"
 
@@ -101,13 +103,10 @@ TEST(MvsFolder, CamFileRoundTripAndErrors) {
 
   auto expect_error = [&](const std::string& text, const std::string& needle) {
     write_text(dir + "/bad_cam.txt", text);
-    try {
-      read_cam_file(dir + "/bad_cam.txt");
-      ADD_FAILURE() << "accepted: " << text;
-    } catch (const std::runtime_error& e) {
-      EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
-      EXPECT_NE(std::string(e.what()).find("bad_cam.txt"), std::string::npos) << e.what();
-    }
+    EXPECT_THAT([&] { read_cam_file(dir + "/bad_cam.txt"); },
+                testing::ThrowsMessage<std::runtime_error>(
+                    testing::AllOf(testing::HasSubstr(needle), testing::HasSubstr("bad_cam.txt"))))
+        << text;
   };
   const std::string ext = "extrinsic\n1 0 0 0\n0 1 0 0\n0 0 1 0\n0 0 0 1\n";
   const std::string intr = "intrinsic\n100 0 50\n0 100 40\n0 0 1\n";
@@ -127,12 +126,30 @@ TEST(MvsFolder, PairFileRoundTripAndMissingParts) {
   ASSERT_EQ(r.size(), 2u);
   EXPECT_EQ(r[0].sources, (std::vector<int>{1, 2}));
   EXPECT_DOUBLE_EQ(r[0].scores[1], 1.25);
-  try {
-    MvsFolder folder(dir);
-    FAIL();
-  } catch (const std::runtime_error& e) {
-    EXPECT_NE(std::string(e.what()).find("images/"), std::string::npos);
-  }
+  EXPECT_THAT([&] { MvsFolder folder(dir); },
+              testing::ThrowsMessage<std::runtime_error>(testing::HasSubstr("images/")));
+}
+
+TEST(InferenceFolder, OneLayoutForInferFuseAndEval) {
+  const std::string root = test::temp_dir("inference_folder");
+  const InferenceFolder f(root + "/out");
+  EXPECT_FALSE(InferenceFolder::holds(f.root()));
+  f.create();
+  EXPECT_TRUE(InferenceFolder::holds(f.root()));
+  EXPECT_EQ(f.depth_path(7), root + "/out/depth_est/00000007.pfm");
+  EXPECT_EQ(f.depth_preview_path(7), root + "/out/depth_est/00000007.png");
+  EXPECT_EQ(f.confidence_path(7), root + "/out/confidence/00000007.pfm");
+  EXPECT_EQ(f.confidence_preview_path(7), root + "/out/confidence/00000007.png");
+  EXPECT_EQ(f.cam_path(7), root + "/out/cams/00000007_cam.txt");
+  EXPECT_EQ(f.image_path(7), root + "/out/images/00000007.png");
+  EXPECT_EQ(f.pair_file(), root + "/out/pair.txt");
+  // Images are looked up as MVSNet folders name them, .jpg before .png.
+  std::ofstream(f.images_dir() + "/00000003.png") << "x";
+  EXPECT_EQ(find_view_image(f.images_dir(), 3), f.images_dir() + "/00000003.png");
+  std::ofstream(f.images_dir() + "/00000003.jpg") << "x";
+  EXPECT_EQ(find_view_image(f.images_dir(), 3), f.images_dir() + "/00000003.jpg");
+  EXPECT_THAT([&] { find_view_image(f.images_dir(), 4); },
+              testing::ThrowsMessage<std::runtime_error>(testing::HasSubstr("no image for view 4 in " + f.images_dir())));
 }
 
 TEST(Checkpoint, RoundTripAndMismatchIsNamed) {
@@ -160,19 +177,11 @@ TEST(Checkpoint, RoundTripAndMismatchIsNamed) {
 
   MvsNetConfig want_refine = cfg;
   want_refine.refine = true;
-  try {
-    load_model(dir + "/a.pt", torch::kCPU, &want_refine);
-    FAIL();
-  } catch (const std::runtime_error& e) {
-    EXPECT_NE(std::string(e.what()).find("refinement"), std::string::npos) << e.what();
-  }
+  EXPECT_THAT([&] { load_model(dir + "/a.pt", torch::kCPU, &want_refine); },
+              testing::ThrowsMessage<std::runtime_error>(testing::HasSubstr("refinement")));
   write_text(dir + "/corrupt.pt", "this is not a checkpoint");
-  try {
-    load_model(dir + "/corrupt.pt", torch::kCPU);
-    FAIL();
-  } catch (const std::runtime_error& e) {
-    EXPECT_NE(std::string(e.what()).find("corrupt.pt"), std::string::npos) << e.what();
-  }
+  EXPECT_THAT([&] { load_model(dir + "/corrupt.pt", torch::kCPU); },
+              testing::ThrowsMessage<std::runtime_error>(testing::HasSubstr("corrupt.pt")));
 }
 
 TEST(Checkpoint, StateDictErrorsNameTheTensors) {
@@ -183,15 +192,8 @@ TEST(Checkpoint, StateDictErrorsNameTheTensors) {
   d.erase("feature.conv0.bn.weight");
   d.insert_or_assign("feature.feature.bias", torch::zeros({31}));
   d.insert("extra.weight", torch::zeros({1}));
-  try {
-    load_state_dict(*net, d, "weights.pt");
-    FAIL();
-  } catch (const std::runtime_error& e) {
-    const std::string msg = e.what();
-    EXPECT_NE(msg.find("missing tensor 'feature.conv0.bn.weight'"), std::string::npos) << msg;
-    EXPECT_NE(msg.find("'feature.feature.bias' has shape [31]"), std::string::npos) << msg;
-    EXPECT_NE(msg.find("unexpected tensor 'extra.weight'"), std::string::npos) << msg;
-  }
+  EXPECT_THAT([&] { load_state_dict(*net, d, "weights.pt"); },
+              testing::ThrowsMessage<std::runtime_error>(testing::AllOf(testing::HasSubstr("missing tensor 'feature.conv0.bn.weight'"), testing::HasSubstr("'feature.feature.bias' has shape [31]"), testing::HasSubstr("unexpected tensor 'extra.weight'"))));
 }
 
 TEST(ImageIo, PngRoundTrip) {

@@ -1,5 +1,7 @@
 #include "unsup_mvs/io/mvs_folder.h"
 
+#include "unsup_mvs/io/inference_folder.h"
+
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -153,14 +155,7 @@ const ViewPair& MvsFolder::pair_of(int ref) const {
   throw std::runtime_error("view " + std::to_string(ref) + " has no entry in " + root_ + "/pair.txt");
 }
 
-std::string MvsFolder::image_path(int id) const {
-  for (const char* ext : {".jpg", ".png", ".jpeg", ".JPG", ".PNG"}) {
-    const auto p = fs::path(root_) / "images" / (view_file_stem(id) + ext);
-    if (fs::exists(p)) return p.string();
-  }
-  throw std::runtime_error("no image for view " + std::to_string(id) + " in " + root_ + "/images (expected " +
-                           view_file_stem(id) + ".jpg or .png)");
-}
+std::string MvsFolder::image_path(int id) const { return find_view_image(root_ + "/images", id); }
 
 std::string MvsFolder::cam_path(int id) const {
   return (fs::path(root_) / "cams" / (view_file_stem(id) + "_cam.txt")).string();

@@ -10,6 +10,7 @@
 #include "unsup_mvs/core/device.h"
 #include "unsup_mvs/core/metrics.h"
 #include "unsup_mvs/io/array_io.h"
+#include "unsup_mvs/io/inference_folder.h"
 #include "unsup_mvs/io/mvs_folder.h"
 #include "unsup_mvs/io/ply.h"
 #include "unsup_mvs/tools/args.h"
@@ -69,7 +70,8 @@ std::string find_depth_dir(const std::string& root, const std::string& sub) {
     if (!fs::is_directory(p)) throw std::runtime_error("no folder " + p.string());
     return p.string();
   }
-  for (const char* s : {"depth_est", "depth_gt", "depth"}) {
+  if (umvs::InferenceFolder::holds(root)) return umvs::InferenceFolder(root).depth_dir();
+  for (const char* s : {"depth_gt", "depth"}) {
     if (fs::is_directory(fs::path(root) / s)) return (fs::path(root) / s).string();
   }
   if (!fs::is_directory(root)) throw std::runtime_error("estimate folder '" + root + "' does not exist");
@@ -133,7 +135,7 @@ int eval_depth(int argc, char** argv) {
     if (!fs::exists(gt_path)) throw std::runtime_error("no ground truth " + gt_path + " for view " + std::to_string(id));
     torch::Tensor est = umvs::read_pfm(est_path);
     torch::Tensor gt = umvs::read_pfm(gt_path);
-    const std::string est_cam = est_root + "/cams/" + stem + "_cam.txt";
+    const std::string est_cam = umvs::InferenceFolder(est_root).cam_path(id);
     const std::string gt_cam = gt_root + "/cams/" + stem + "_cam.txt";
     if (fs::exists(est_cam) && fs::exists(gt_cam)) {
       auto ce = umvs::read_cam_file(est_cam).camera, cg = umvs::read_cam_file(gt_cam).camera;
@@ -154,7 +156,7 @@ int eval_depth(int argc, char** argv) {
     }
     torch::Tensor valid;
     if (min_conf > 0) {
-      const std::string conf_path = est_root + "/confidence/" + stem + ".pfm";
+      const std::string conf_path = umvs::InferenceFolder(est_root).confidence_path(id);
       if (!fs::exists(conf_path)) throw std::runtime_error("--min-confidence given but " + conf_path + " is missing");
       const auto conf = umvs::read_pfm(conf_path);
       if (conf.sizes() != est.sizes()) throw std::runtime_error(conf_path + " does not match the size of its depth map");

@@ -13,6 +13,7 @@
 #include "unsup_mvs/core/image_ops.h"
 #include "unsup_mvs/io/array_io.h"
 #include "unsup_mvs/io/image_io.h"
+#include "unsup_mvs/io/inference_folder.h"
 #include "unsup_mvs/io/mvs_folder.h"
 #include "unsup_mvs/io/ply.h"
 #include "unsup_mvs/tools/args.h"
@@ -33,12 +34,13 @@ Layout find_layout(const std::string& depth, const std::string& data) {
     if (data.empty()) throw std::invalid_argument("--depth " + depth + " has no " + what + ": give --data (the MVSNet folder)");
     return data;
   };
-  if (fs::is_directory(fs::path(depth) / "depth_est")) {  // written by `umvs infer`
-    l.depth_dir = depth + "/depth_est";
-    if (fs::is_directory(fs::path(depth) / "confidence")) l.confidence_dir = depth + "/confidence";
-    l.cam_dir = fs::is_directory(fs::path(depth) / "cams") ? depth + "/cams" : need_data("cams/") + "/cams";
-    l.image_dir = fs::is_directory(fs::path(depth) / "images") ? depth + "/images" : need_data("images/") + "/images";
-    l.pair_file = fs::exists(fs::path(depth) / "pair.txt") ? depth + "/pair.txt" : need_data("pair.txt") + "/pair.txt";
+  if (umvs::InferenceFolder::holds(depth)) {  // written by `umvs infer`
+    const umvs::InferenceFolder f(depth);
+    l.depth_dir = f.depth_dir();
+    if (fs::is_directory(f.confidence_dir())) l.confidence_dir = f.confidence_dir();
+    l.cam_dir = fs::is_directory(f.cams_dir()) ? f.cams_dir() : need_data("cams/") + "/cams";
+    l.image_dir = fs::is_directory(f.images_dir()) ? f.images_dir() : need_data("images/") + "/images";
+    l.pair_file = fs::exists(f.pair_file()) ? f.pair_file() : need_data("pair.txt") + "/pair.txt";
   } else if (fs::is_directory(depth)) {  // a folder of XXXXXXXX.pfm, e.g. DATA/depth_gt
     l.depth_dir = depth;
     l.cam_dir = need_data("cams/") + "/cams";
@@ -48,14 +50,6 @@ Layout find_layout(const std::string& depth, const std::string& data) {
     throw std::invalid_argument("--depth '" + depth + "' is not a folder");
   }
   return l;
-}
-
-std::string find_image(const std::string& dir, int id) {
-  for (const char* ext : {".png", ".jpg", ".jpeg", ".PNG", ".JPG"}) {
-    const auto p = fs::path(dir) / (umvs::view_file_stem(id) + ext);
-    if (fs::exists(p)) return p.string();
-  }
-  throw std::runtime_error("no image for view " + std::to_string(id) + " in " + dir);
 }
 
 // Depth map, confidence, camera (rescaled to the depth map) and colours of one view.
@@ -69,7 +63,7 @@ umvs::FusionView load_view(const Layout& l, int id) {
   if (!l.confidence_dir.empty() && fs::exists(l.confidence_dir + "/" + stem + ".pfm")) {
     v.confidence = umvs::read_pfm(l.confidence_dir + "/" + stem + ".pfm");
   }
-  const auto image = umvs::read_image_rgb8(find_image(l.image_dir, id));
+  const auto image = umvs::read_image_rgb8(umvs::find_view_image(l.image_dir, id));
   umvs::Camera cam = umvs::read_cam_file(l.cam_dir + "/" + stem + "_cam.txt").camera;
   cam.width = static_cast<int>(image.size(1));
   cam.height = static_cast<int>(image.size(0));
