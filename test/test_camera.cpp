@@ -1,3 +1,4 @@
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
 #include "unsup_mvs/core/camera.h"
@@ -71,13 +72,8 @@ TEST(Camera, ValidateNamesTheProblem) {
   Camera c = make_camera();
   EXPECT_NO_THROW(c.validate());
   c.T_cam_world(0, 3) = std::nan("");
-  try {
-    c.validate("view 7");
-    FAIL() << "NaN pose accepted";
-  } catch (const std::invalid_argument& e) {
-    EXPECT_NE(std::string(e.what()).find("view 7"), std::string::npos);
-    EXPECT_NE(std::string(e.what()).find("NaN"), std::string::npos);
-  }
+  EXPECT_THAT([&] { c.validate("view 7"); },
+              testing::ThrowsMessage<std::invalid_argument>(testing::AllOf(testing::HasSubstr("view 7"), testing::HasSubstr("NaN"))));
   c = make_camera();
   c.T_cam_world(0, 0) *= 2;  // not a rotation
   EXPECT_THROW(c.validate(), std::invalid_argument);

@@ -1,5 +1,6 @@
 // Supervised training on rendered depth and mixed runs (core/losses.h supervised_depth_loss,
 // core/training.h Trainer, io/training_data.h MixedSampler), input normalisation and exposure.
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 #include <torch/torch.h>
 
@@ -118,13 +119,8 @@ TEST(SupervisedLoss, SupervisedFolderWithoutGroundTruthIsRefusedByName) {
   cfg.width = 128;
   cfg.height = 96;
   cfg.supervised = true;
-  try {
-    MvsFolderSource source({dir}, cfg);
-    FAIL() << "a folder without depth_gt/ was accepted for supervised training";
-  } catch (const std::runtime_error& e) {
-    EXPECT_NE(std::string(e.what()).find("depth_gt"), std::string::npos) << e.what();
-    EXPECT_NE(std::string(e.what()).find(dir), std::string::npos) << e.what();
-  }
+  EXPECT_THAT([&] { MvsFolderSource source({dir}, cfg); },
+              testing::ThrowsMessage<std::runtime_error>(testing::AllOf(testing::HasSubstr("depth_gt"), testing::HasSubstr(dir))));
 }
 
 TEST(MixedTraining, LearnsOnRenderedAndRealKindsInOneRun) {
