@@ -223,6 +223,23 @@ TEST(TrainCommand, ResumeContinuesBitForBitAndKeepsTheBestModel) {
   EXPECT_EQ(load_model(out + "/a/last.pt", torch::kCPU).meta.step, 4);
 }
 
+TEST(TrainCommand, MaxMinutesStopsWithACheckpointThatResumes) {
+  const std::string data = write_scene("max_minutes", 96, 64, 5, 2);
+  const std::string out = test::temp_dir("max_minutes_out");
+  const std::string common = "--data " + data + " --width 96 --height 64 --num-depth 8 --views-loss 3 --top-k 2" +
+                             " --threads 1 --save-every 1000 --out " + out + "/run";
+  // 6 ms of wall time: the run stops after its first step, far before --steps.
+  ASSERT_EQ(run(common + " --steps 1000 --max-minutes 0.0001"), 0);
+  const int64_t stopped = load_model(out + "/run/last.pt", torch::kCPU).meta.step;
+  EXPECT_GE(stopped, 1);
+  EXPECT_LT(stopped, 1000);
+  // --resume continues from there (--max-minutes may change on resume).
+  ASSERT_EQ(run(common + " --steps " + std::to_string(stopped + 2) + " --resume"), 0);
+  EXPECT_EQ(load_model(out + "/run/last.pt", torch::kCPU).meta.step, stopped + 2);
+  EXPECT_NE(run(common + "2 --steps 3 --max-minutes -1"), 0);
+  EXPECT_FALSE(std::filesystem::exists(out + "/run2"));
+}
+
 TEST(Training, LossCurveAndDepthErrors) {
   CurveSeries s;
   for (int i = 0; i < 100; ++i) s.x.push_back(i), s.y.push_back(1.0 / (1 + i));
