@@ -10,8 +10,8 @@
 #include <limits>
 
 #include "test_util.h"
-#include "unsup_mvs/io/bag_io.h"
-#include "unsup_mvs/io/bag_messages.h"
+#include "unsup_mvs/io/ros/bag_io.h"
+#include "unsup_mvs/io/ros/ros_conversions.h"
 
 namespace umvs {
 namespace {

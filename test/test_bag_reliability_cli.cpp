@@ -8,9 +8,9 @@
 #include <filesystem>
 
 #include "cli_test_util.h"
-#include "unsup_mvs/io/bag_io.h"
-#include "unsup_mvs/io/bag_messages.h"
-#include "unsup_mvs/io/bag_training_data.h"
+#include "unsup_mvs/io/ros/bag_io.h"
+#include "unsup_mvs/io/ros/ros_conversions.h"
+#include "unsup_mvs/io/ros/bag_training_data.h"
 
 namespace umvs {
 namespace {

@@ -12,8 +12,8 @@
 
 #include "test_util.h"
 #include "unsup_mvs/core/synth.h"
-#include "unsup_mvs/io/bag_io.h"
-#include "unsup_mvs/io/bag_training_data.h"
+#include "unsup_mvs/io/ros/bag_io.h"
+#include "unsup_mvs/io/ros/bag_training_data.h"
 
 namespace {
 

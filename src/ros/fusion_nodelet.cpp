@@ -18,7 +18,7 @@
 #include "unsup_mvs/core/device.h"
 #include "unsup_mvs/core/fusion.h"
 #include "unsup_mvs/io/atomic_file.h"
-#include "unsup_mvs/io/bag_messages.h"
+#include "unsup_mvs/io/ros/ros_conversions.h"
 #include "unsup_mvs/io/file_safety.h"
 #include "unsup_mvs/io/ply.h"
 #include "unsup_mvs/ros/nodelets.h"
@@ -110,9 +110,7 @@ class FusionNodelet : public nodelet::Nodelet {
       view.id = msg->keyframe_id;
       view.depth = umvs::image_msg_to_float(msg->depth);
       view.confidence = umvs::image_msg_to_float(msg->confidence);
-      view.camera = umvs::camera_from_info(msg->camera_info, true);
-      view.camera.T_cam_world = umvs::pose_to_matrix(msg->pose).inverse();
-      view.camera.validate("depth estimate camera");
+      view.camera = umvs::posed_camera_from_msgs(msg->camera_info, msg->pose, /*rectified=*/true);
       if (!msg->image.data.empty()) {
         view.color = umvs::image_msg_to_rgb8(msg->image);
         if (view.color.size(0) != view.depth.size(0) || view.color.size(1) != view.depth.size(1)) view.color = torch::Tensor();

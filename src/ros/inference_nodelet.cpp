@@ -22,7 +22,7 @@
 #include "unsup_mvs/ReloadModel.h"
 #include "unsup_mvs/core/depth_estimator.h"
 #include "unsup_mvs/core/device.h"
-#include "unsup_mvs/io/bag_messages.h"
+#include "unsup_mvs/io/ros/ros_conversions.h"
 #include "unsup_mvs/io/checkpoint.h"
 #include "unsup_mvs/io/file_safety.h"
 #include "unsup_mvs/io/input_limits.h"
@@ -38,11 +38,10 @@ umvs::ViewInput view_from_msg(const sensor_msgs::Image& image, const sensor_msgs
                               const std::string& name) {
   try {
     umvs::check_image_msg(image, max_pixels);
+    const umvs::PosedImage posed = umvs::posed_image_from_msgs(image, info, pose, rectified);
     umvs::ViewInput v;
-    v.camera = umvs::camera_from_info(info, rectified);
-    v.camera.T_cam_world = umvs::pose_to_matrix(pose).inverse();
-    v.camera.validate(name);
-    v.image = umvs::image_msg_to_rgb8(image);
+    v.camera = posed.camera;
+    v.image = posed.image;
     return v;
   } catch (const std::exception& e) {
     throw std::invalid_argument(name + ": " + e.what());

@@ -23,7 +23,7 @@
 #include "unsup_mvs/DepthEstimate.h"
 #include "unsup_mvs/KeyframeSet.h"
 #include "unsup_mvs/core/keyframes.h"
-#include "unsup_mvs/io/bag_messages.h"
+#include "unsup_mvs/io/ros/ros_conversions.h"
 #include "unsup_mvs/ros/nodelets.h"
 #include "unsup_mvs/ros/params.h"
 
@@ -147,11 +147,7 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
                             world_frame_.c_str(), camera_frame.c_str(), image->header.stamp.toSec(), e.what());
       return;
     }
-    geometry_msgs::Pose pose;
-    pose.position.x = tf.transform.translation.x;
-    pose.position.y = tf.transform.translation.y;
-    pose.position.z = tf.transform.translation.z;
-    pose.orientation = tf.transform.rotation;
+    const geometry_msgs::Pose pose = umvs::pose_from_transform(tf.transform);
     try {
       camera.T_cam_world = umvs::pose_to_matrix(pose).inverse();
       camera.validate("camera pose");

@@ -9,7 +9,7 @@
 #include <sstream>
 
 #include "unsup_mvs/ReloadModel.h"
-#include "unsup_mvs/io/bag_training_data.h"
+#include "unsup_mvs/io/ros/bag_training_data.h"
 #include "unsup_mvs/io/file_safety.h"
 #include "unsup_mvs/ros/params.h"
 

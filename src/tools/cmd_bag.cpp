@@ -6,7 +6,7 @@
 #include <iostream>
 
 #include "unsup_mvs/io/array_io.h"
-#include "unsup_mvs/io/bag_io.h"
+#include "unsup_mvs/io/ros/bag_io.h"
 #include "unsup_mvs/io/mvs_folder.h"
 #include "unsup_mvs/tools/args.h"
 #include "unsup_mvs/tools/command.h"

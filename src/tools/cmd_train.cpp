@@ -16,7 +16,7 @@
 #include "unsup_mvs/io/run_folder.h"
 #include "unsup_mvs/io/training_data.h"
 #ifdef UMVS_HAVE_ROS
-#include "unsup_mvs/io/bag_training_data.h"
+#include "unsup_mvs/io/ros/bag_training_data.h"
 #endif
 #include "unsup_mvs/tools/args.h"
 #include "unsup_mvs/tools/command.h"

@@ -26,7 +26,7 @@
 #include "unsup_mvs/ReloadModel.h"
 #include "unsup_mvs/SaveCloud.h"
 #include "unsup_mvs/TrainingProgress.h"
-#include "unsup_mvs/io/bag_messages.h"
+#include "unsup_mvs/io/ros/ros_conversions.h"
 #include "unsup_mvs/io/checkpoint.h"
 #include "unsup_mvs/io/child_process.h"
 #include "unsup_mvs/io/ply.h"

@@ -13,7 +13,7 @@
 #include "unsup_mvs/DepthEstimate.h"
 #include "unsup_mvs/ResetFusion.h"
 #include "unsup_mvs/SaveCloud.h"
-#include "unsup_mvs/io/bag_messages.h"
+#include "unsup_mvs/io/ros/ros_conversions.h"
 #include "unsup_mvs/io/ply.h"
 
 namespace {

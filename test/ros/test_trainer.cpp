@@ -21,7 +21,7 @@
 #include "unsup_mvs/ReloadModel.h"
 #include "unsup_mvs/SaveCloud.h"
 #include "unsup_mvs/TrainingProgress.h"
-#include "unsup_mvs/io/bag_messages.h"
+#include "unsup_mvs/io/ros/ros_conversions.h"
 #include "unsup_mvs/io/mvs_folder.h"
 
 namespace fs = std::filesystem;

@@ -15,7 +15,7 @@
 #include <vector>
 
 #include "unsup_mvs/core/keyframes.h"
-#include "unsup_mvs/io/bag_io.h"
+#include "unsup_mvs/io/ros/bag_io.h"
 #include "unsup_mvs/io/training_data.h"
 
 namespace umvs {

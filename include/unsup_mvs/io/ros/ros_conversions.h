@@ -1,8 +1,9 @@
-// ROS message <-> core type conversions, shared by the bag reader/writer and the nodes. Only in
-// the ROS build (files named bag_* are left out of the portable build).
+// ROS message <-> core type conversions, shared by the nodes and the bag reader/writer. Only in
+// the ROS build (io/ros/ is left out of the portable build).
 #pragma once
 
 #include <geometry_msgs/Pose.h>
+#include <geometry_msgs/Transform.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
 #include <torch/types.h>
@@ -45,5 +46,25 @@ sensor_msgs::CameraInfo camera_info_from_camera(const Camera& camera, const std_
 // throws std::invalid_argument for a non-finite pose or a quaternion far from unit length.
 Eigen::Matrix4d pose_to_matrix(const geometry_msgs::Pose& pose);
 geometry_msgs::Pose matrix_to_pose(const Eigen::Matrix4d& T);
+// A tf2 transform (parent -> child) as the child's pose in the parent frame.
+geometry_msgs::Pose pose_from_transform(const geometry_msgs::Transform& transform);
+
+// A calibrated, posed image as the pipeline uses it.
+struct PosedImage {
+  double stamp = 0.0;    // seconds
+  torch::Tensor image;   // uint8 [H,W,3] RGB
+  Camera camera;         // intrinsics, size and T_cam_world
+  torch::Tensor depth;   // float32 [H,W] metres, when a bag's depth topic is set and has a message at the stamp
+};
+
+// The camera of an image from its CameraInfo (see camera_from_info) and its pose T_world_camera
+// (the optical frame's pose in the world, REP 103), validated. Throws std::invalid_argument.
+Camera posed_camera_from_msgs(const sensor_msgs::CameraInfo& info, const geometry_msgs::Pose& T_world_camera,
+                              bool rectified);
+// The same plus the image as rgb8, which must have the CameraInfo's size (the image is not checked
+// against a pixel budget here: check_image_msg first where a bound applies). Throws
+// std::invalid_argument.
+PosedImage posed_image_from_msgs(const sensor_msgs::Image& image, const sensor_msgs::CameraInfo& info,
+                                 const geometry_msgs::Pose& T_world_camera, bool rectified);
 
 }  // namespace umvs

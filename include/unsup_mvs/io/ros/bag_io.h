@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "unsup_mvs/core/camera.h"
+#include "unsup_mvs/io/ros/ros_conversions.h"
 
 namespace rosbag {
 class Bag;
@@ -29,13 +30,6 @@ struct BagTopics {
   // Optional ground truth: sensor_msgs/Image 32FC1 z-depth in metres (0 = unknown), registered to
   // the image and stamped like it. "" = none (read: ignored; write: not written).
   std::string depth;
-};
-
-struct PosedImage {
-  double stamp = 0.0;    // seconds
-  torch::Tensor image;   // uint8 [H,W,3] RGB
-  Camera camera;         // intrinsics, size and T_cam_world
-  torch::Tensor depth;   // float32 [H,W] metres, when topics.depth is set and has a message at the stamp
 };
 
 // Writes a log. The bag is written to a temporary file beside `path` and renamed by close(), so

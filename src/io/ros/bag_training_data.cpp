@@ -1,4 +1,4 @@
-#include "unsup_mvs/io/bag_training_data.h"
+#include "unsup_mvs/io/ros/bag_training_data.h"
 
 #include <cmath>
 #include <ostream>

@@ -1,4 +1,4 @@
-#include "unsup_mvs/io/bag_io.h"
+#include "unsup_mvs/io/ros/bag_io.h"
 
 #include <rosbag/bag.h>
 #include <rosbag/view.h>
@@ -15,7 +15,7 @@
 #include <memory>
 #include <stdexcept>
 
-#include "unsup_mvs/io/bag_messages.h"
+#include "unsup_mvs/io/ros/ros_conversions.h"
 #include "unsup_mvs/io/file_safety.h"
 
 namespace umvs {
@@ -154,9 +154,8 @@ BagReadStats for_each_posed_image(const std::string& path, const BagTopics& topi
       auto it = infos.upper_bound(img->header.stamp);
       const sensor_msgs::CameraInfo::ConstPtr info = it == infos.begin() ? it->second : std::prev(it)->second;
       const std::string frame = img->header.frame_id.empty() ? topics.camera_frame : img->header.frame_id;
-      PosedImage out;
-      out.stamp = img->header.stamp.toSec();
-      Eigen::Matrix4d T_world_cam;
+      const double stamp = img->header.stamp.toSec();
+      geometry_msgs::Pose pose;  // T_world_camera
       if (!has_tf) {
         ++stats.without_pose;
         note("no transform found from '" + topics.world_frame + "' to the camera frame '" + frame +
@@ -164,34 +163,24 @@ BagReadStats for_each_posed_image(const std::string& path, const BagTopics& topi
         continue;
       }
       try {
-        const auto tf = tf_buffer.lookupTransform(topics.world_frame, frame, img->header.stamp);
-        geometry_msgs::Pose pose;
-        pose.position.x = tf.transform.translation.x;
-        pose.position.y = tf.transform.translation.y;
-        pose.position.z = tf.transform.translation.z;
-        pose.orientation = tf.transform.rotation;
-        T_world_cam = pose_to_matrix(pose);
+        pose = pose_from_transform(tf_buffer.lookupTransform(topics.world_frame, frame, img->header.stamp).transform);
+        pose_to_matrix(pose);  // a bad pose is reported as such
       } catch (const tf2::TransformException& e) {
         ++stats.without_pose;
         note("no transform found from '" + topics.world_frame + "' to the camera frame '" + frame + "' at " +
-             std::to_string(out.stamp) + ": " + e.what());
+             std::to_string(stamp) + ": " + e.what());
         continue;
       } catch (const std::invalid_argument& e) {
         ++stats.invalid;
         note(std::string("bad pose: ") + e.what());
         continue;
       }
+      PosedImage out;
       try {
-        out.camera = camera_from_info(*info, rectified);
-        out.camera.T_cam_world = T_world_cam.inverse();
-        out.camera.validate("image at " + std::to_string(out.stamp));
-        out.image = image_msg_to_rgb8(*img);
-        if (out.image.size(0) != out.camera.height || out.image.size(1) != out.camera.width) {
-          throw std::invalid_argument("image size differs from its CameraInfo");
-        }
+        out = posed_image_from_msgs(*img, *info, pose, rectified);
       } catch (const std::invalid_argument& e) {
         ++stats.invalid;
-        note(e.what());
+        note("image at " + std::to_string(stamp) + ": " + e.what());
         continue;
       }
       const auto d = depths.find(img->header.stamp);

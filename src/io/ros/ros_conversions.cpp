@@ -1,4 +1,4 @@
-#include "unsup_mvs/io/bag_messages.h"
+#include "unsup_mvs/io/ros/ros_conversions.h"
 
 #include <sensor_msgs/image_encodings.h>
 #include <torch/torch.h>
@@ -197,6 +197,37 @@ geometry_msgs::Pose matrix_to_pose(const Eigen::Matrix4d& T) {
   pose.orientation.y = q.y();
   pose.orientation.z = q.z();
   return pose;
+}
+
+geometry_msgs::Pose pose_from_transform(const geometry_msgs::Transform& transform) {
+  geometry_msgs::Pose pose;
+  pose.position.x = transform.translation.x;
+  pose.position.y = transform.translation.y;
+  pose.position.z = transform.translation.z;
+  pose.orientation = transform.rotation;
+  return pose;
+}
+
+Camera posed_camera_from_msgs(const sensor_msgs::CameraInfo& info, const geometry_msgs::Pose& T_world_camera,
+                              bool rectified) {
+  Camera camera = camera_from_info(info, rectified);
+  camera.T_cam_world = pose_to_matrix(T_world_camera).inverse();
+  camera.validate();
+  return camera;
+}
+
+PosedImage posed_image_from_msgs(const sensor_msgs::Image& image, const sensor_msgs::CameraInfo& info,
+                                 const geometry_msgs::Pose& T_world_camera, bool rectified) {
+  PosedImage out;
+  out.stamp = image.header.stamp.toSec();
+  out.camera = posed_camera_from_msgs(info, T_world_camera, rectified);
+  out.image = image_msg_to_rgb8(image);
+  if (out.image.size(0) != out.camera.height || out.image.size(1) != out.camera.width) {
+    throw std::invalid_argument("image size " + std::to_string(out.image.size(1)) + "x" +
+                                std::to_string(out.image.size(0)) + " differs from its CameraInfo's " +
+                                std::to_string(out.camera.width) + "x" + std::to_string(out.camera.height));
+  }
+  return out;
 }
 
 }  // namespace umvs
