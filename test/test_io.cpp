@@ -11,6 +11,7 @@
 #include "unsup_mvs/io/inference_folder.h"
 #include "unsup_mvs/io/mvs_folder.h"
 #include "unsup_mvs/io/ply.h"
+#include "unsup_mvs/io/run_folder.h"
 
 namespace umvs {
 namespace {
@@ -150,6 +151,33 @@ TEST(InferenceFolder, OneLayoutForInferFuseAndEval) {
   EXPECT_EQ(find_view_image(f.images_dir(), 3), f.images_dir() + "/00000003.jpg");
   EXPECT_THAT([&] { find_view_image(f.images_dir(), 4); },
               testing::ThrowsMessage<std::runtime_error>(testing::HasSubstr("no image for view 4 in " + f.images_dir())));
+}
+
+TEST(RunTables, WriterAndReadersShareOneDefinition) {
+  const std::string dir = test::temp_dir("run_tables");
+  EXPECT_EQ(csv_header(train_log_columns()).rfind("step,total,photometric,", 0), 0u);
+  EXPECT_EQ(csv_header(eval_columns()).rfind("checkpoint,tuples,photometric,", 0), 0u);
+  // Two steps, the last without validation (empty cells, one of them trailing).
+  std::ofstream(dir + "/log.csv") << csv_header({"step", "total", "val_abs_err", "supervised"}) << "\n1,0.5,0.25,0.1\n"
+                                  << "2,0.4,,\n\n";
+  CsvRow row({}, {});
+  ASSERT_TRUE(read_last_csv_row(dir + "/log.csv", &row));
+  double v = -1;
+  EXPECT_TRUE(row.number("step", &v));
+  EXPECT_EQ(v, 2);
+  EXPECT_TRUE(row.number("total", &v));
+  EXPECT_DOUBLE_EQ(v, 0.4);
+  v = -1;
+  EXPECT_FALSE(row.number("val_abs_err", &v));  // not measured at that step
+  EXPECT_FALSE(row.number("supervised", &v));
+  EXPECT_FALSE(row.number("no_such_column", &v));
+  EXPECT_EQ(v, -1);
+  std::ofstream(dir + "/bad.csv") << "photometric\n0.1x\n";
+  ASSERT_TRUE(read_last_csv_row(dir + "/bad.csv", &row));
+  EXPECT_FALSE(row.number("photometric", &v));
+  EXPECT_FALSE(read_last_csv_row(dir + "/missing.csv", &row));
+  std::ofstream(dir + "/header_only.csv") << "step,total\n";
+  EXPECT_FALSE(read_last_csv_row(dir + "/header_only.csv", &row));
 }
 
 TEST(Checkpoint, RoundTripAndMismatchIsNamed) {

@@ -1,5 +1,6 @@
 #include "unsup_mvs/io/run_folder.h"
 
+#include <sstream>
 #include <algorithm>
 #include <filesystem>
 #include <fstream>
@@ -111,6 +112,66 @@ void remove_run_files(const std::string& out) {
     fs::remove(p, ec);
     if (ec) throw std::runtime_error("--overwrite: cannot remove " + p.string() + ": " + ec.message());
   }
+}
+
+const std::vector<std::string>& train_log_columns() {
+  static const std::vector<std::string> columns = {
+      "step",    "total",           "photometric", "ssim",        "smoothness",      "valid_fraction", "lr",
+      "seconds", "val_photometric", "val_total",   "val_abs_err", "val_within_1pct", "supervised"};
+  return columns;
+}
+
+const std::vector<std::string>& eval_columns() {
+  static const std::vector<std::string> columns = {"checkpoint", "tuples",  "photometric", "ssim",        "smoothness",
+                                                   "total",      "abs_err", "abs_rel",     "within_1pct", "consistent"};
+  return columns;
+}
+
+std::string csv_header(const std::vector<std::string>& columns) {
+  std::string s;
+  for (const auto& c : columns) s += (s.empty() ? "" : ",") + c;
+  return s;
+}
+
+namespace {
+std::vector<std::string> split_csv_line(const std::string& line) {
+  std::vector<std::string> fields;
+  std::stringstream s(line);
+  for (std::string f; std::getline(s, f, ',');) fields.push_back(f);
+  if (!line.empty() && line.back() == ',') fields.emplace_back();  // a trailing empty cell
+  return fields;
+}
+}  // namespace
+
+CsvRow::CsvRow(std::vector<std::string> names, std::vector<std::string> values)
+    : names_(std::move(names)), values_(std::move(values)) {}
+
+bool CsvRow::number(const std::string& name, double* value) const {
+  for (size_t i = 0; i < names_.size() && i < values_.size(); ++i) {
+    if (names_[i] != name || values_[i].empty()) continue;
+    try {
+      size_t used = 0;
+      const double v = std::stod(values_[i], &used);
+      if (used != values_[i].size()) return false;
+      *value = v;
+      return true;
+    } catch (const std::exception&) {
+      return false;
+    }
+  }
+  return false;
+}
+
+bool read_last_csv_row(const std::string& path, CsvRow* row) {
+  std::ifstream in(path);
+  std::string header, line, last;
+  if (!std::getline(in, header)) return false;
+  while (std::getline(in, line)) {
+    if (!line.empty()) last = line;
+  }
+  if (last.empty()) return false;
+  *row = CsvRow(split_csv_line(header), split_csv_line(last));
+  return true;
 }
 
 }  // namespace umvs

@@ -11,6 +11,7 @@
 #include "unsup_mvs/ReloadModel.h"
 #include "unsup_mvs/io/ros/bag_training_data.h"
 #include "unsup_mvs/io/file_safety.h"
+#include "unsup_mvs/io/run_folder.h"
 #include "unsup_mvs/ros/params.h"
 
 namespace umvs_ros {
@@ -18,23 +19,9 @@ namespace umvs_ros {
 namespace fs = std::filesystem;
 
 bool read_eval_scores(const std::string& eval_csv, EvalScores* scores) {
-  std::ifstream in(eval_csv);
-  std::string header, row;
-  if (!std::getline(in, header) || !std::getline(in, row)) return false;
-  std::vector<std::string> names, values;
-  for (std::stringstream h(header); std::getline(h, names.emplace_back(), ',');) {}
-  for (std::stringstream r(row); std::getline(r, values.emplace_back(), ',');) {}
-  bool photometric = false, consistent = false;
-  for (size_t i = 0; i < names.size() && i < values.size(); ++i) {
-    if (values[i].empty() || (names[i] != "photometric" && names[i] != "consistent")) continue;
-    try {
-      (names[i] == "photometric" ? scores->photometric : scores->consistent) = std::stod(values[i]);
-      (names[i] == "photometric" ? photometric : consistent) = true;
-    } catch (const std::exception&) {
-      return false;
-    }
-  }
-  return photometric && consistent;
+  umvs::CsvRow row({}, {});
+  return umvs::read_last_csv_row(eval_csv, &row) && row.number("photometric", &scores->photometric) &&
+         row.number("consistent", &scores->consistent);
 }
 
 namespace {
@@ -205,26 +192,12 @@ bool Trainer::on_status(std_srvs::Trigger::Request&, std_srvs::Trigger::Response
 }
 
 void Trainer::read_training_log() {
-  std::ifstream in(job_dir_ + "/train_log.csv");
-  std::string header, line, last;
-  if (!std::getline(in, header)) return;
-  while (std::getline(in, line)) {
-    if (!line.empty()) last = line;
-  }
-  if (last.empty()) return;
-  std::vector<std::string> names, values;
-  for (std::stringstream h(header); std::getline(h, names.emplace_back(), ',');) {}
-  for (std::stringstream r(last); std::getline(r, values.emplace_back(), ',');) {}
+  umvs::CsvRow row({}, {});
+  if (!umvs::read_last_csv_row(job_dir_ + "/train_log.csv", &row)) return;
   auto value = [&](const std::string& name, double fallback) {
-    for (size_t i = 0; i < names.size() && i < values.size(); ++i) {
-      if (names[i] == name && !values[i].empty()) {
-        try {
-          return std::stod(values[i]);
-        } catch (const std::exception&) {
-        }
-      }
-    }
-    return fallback;
+    double v = fallback;
+    row.number(name, &v);
+    return v;
   };
   last_.step = static_cast<int>(value("step", last_.step));
   last_.loss = static_cast<float>(value("total", last_.loss));

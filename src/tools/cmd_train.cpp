@@ -26,10 +26,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-const char* kCsvHeader =
-    "step,total,photometric,ssim,smoothness,valid_fraction,lr,seconds,val_photometric,val_total,val_abs_err,"
-    "val_within_1pct,supervised";
-
 struct LogRow {
   int64_t step = 0;
   umvs::LossValues loss;
@@ -38,6 +34,7 @@ struct LogRow {
   umvs::Evaluation val;
 };
 
+// One row of train_log.csv, in the order of umvs::train_log_columns().
 std::string csv_line(const LogRow& r) {
   std::ostringstream s;
   s.precision(7);
@@ -438,7 +435,7 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
     if (!args.str("out").empty()) {
       umvs::make_directories(args.str("out"));
       umvs::write_file_atomically(args.str("out") + "/eval.csv", [&](std::ostream& os) {
-        os << "checkpoint,tuples,photometric,ssim,smoothness,total,abs_err,abs_rel,within_1pct,consistent\n"
+        os << umvs::csv_header(umvs::eval_columns()) << "\n"
            << args.str("eval-only") << "," << ev.tuples << "," << ev.loss.photometric << "," << ev.loss.ssim << ","
            << ev.loss.smoothness << "," << ev.loss.total << ",";
         if (ev.depth.pixels > 0) {
@@ -530,7 +527,7 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
   umvs::write_run_config(out + "/" + umvs::kRunConfigFile, run_config);
   // The log holds exactly the rows up to the starting step (rows after the resumed checkpoint are dropped).
   umvs::write_file_atomically(log_path, [&](std::ostream& os) {
-    os << kCsvHeader << "\n";
+    os << umvs::csv_header(umvs::train_log_columns()) << "\n";
     for (const auto& l : kept_lines) os << l << "\n";
   });
   std::ofstream log(log_path, std::ios::app);

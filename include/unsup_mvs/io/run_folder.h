@@ -46,4 +46,26 @@ void write_run_config(const std::string& path, const RunConfig& config);
 // std::runtime_error naming a file that cannot be removed.
 void remove_run_files(const std::string& out);
 
+// The tables of a run, defined once for `umvs train` (the writer) and their readers (the trainer
+// node, scripts): OUT/train_log.csv, one row per step, and OUT/eval.csv, the one row of
+// --eval-only. Empty cells are values not measured (no validation at that step, no ground truth).
+const std::vector<std::string>& train_log_columns();
+const std::vector<std::string>& eval_columns();
+std::string csv_header(const std::vector<std::string>& columns);  // "a,b,c"
+
+// A row of such a table, read by column name.
+class CsvRow {
+ public:
+  CsvRow(std::vector<std::string> names, std::vector<std::string> values);
+  // The number in column `name`; false (and `value` untouched) when the column is missing, empty or
+  // not a number.
+  bool number(const std::string& name, double* value) const;
+
+ private:
+  std::vector<std::string> names_, values_;
+};
+// The last non-empty row of a CSV file with a header line; false when the file is missing or has
+// no row.
+bool read_last_csv_row(const std::string& path, CsvRow* row);
+
 }  // namespace umvs
