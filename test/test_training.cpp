@@ -12,6 +12,7 @@
 #include "unsup_mvs/core/training.h"
 #include "unsup_mvs/io/checkpoint.h"
 #include "unsup_mvs/io/image_io.h"
+#include "unsup_mvs/io/loss_curve.h"
 #include "unsup_mvs/io/synth_writer.h"
 #include "unsup_mvs/io/training_data.h"
 

@@ -13,6 +13,7 @@
 #include "unsup_mvs/io/atomic_file.h"
 #include "unsup_mvs/io/checkpoint.h"
 #include "unsup_mvs/io/image_io.h"
+#include "unsup_mvs/io/loss_curve.h"
 #include "unsup_mvs/io/run_folder.h"
 #include "unsup_mvs/io/training_data.h"
 #ifdef UMVS_HAVE_ROS

@@ -150,13 +150,4 @@ std::vector<TrainingTuple> pseudo_labelled_tuples(MvsNet& model, const std::vect
 std::string torch_rng_state();
 void set_torch_rng_state(const std::string& bytes);
 
-// A loss-curve picture: each series is drawn as a polyline over the step range on a log10 y
-// axis, with a light grid at powers of ten and the y range written at the left edge.
-//   -> uint8 [height,width,3]
-struct CurveSeries {
-  std::vector<double> x, y;
-  uint8_t r = 0, g = 0, b = 0;
-};
-torch::Tensor render_curves(const std::vector<CurveSeries>& series, int width = 800, int height = 400);
-
 }  // namespace umvs
