@@ -59,26 +59,17 @@ class FusionNodelet : public nodelet::Nodelet {
   void onInit() override {
     ros::NodeHandle& nh = getNodeHandle();
     ros::NodeHandle& pnh = getPrivateNodeHandle();
-    pnh.param<std::string>("world_frame", world_frame_, "world");
-    int window = 8, max_points = 2000000;
     double publish_rate = 1.0;
-    std::string device_name;
-    pnh.param("window", window, window);
-    pnh.param("max_points", max_points, max_points);
-    pnh.param("publish_rate", publish_rate, publish_rate);
-    pnh.param<std::string>("device", device_name, "cpu");
-    pnh.param<std::string>("save_dir", save_dir_, "");
-    if (save_dir_.empty()) save_dir_ = ros_home() + "/unsup_mvs_clouds";
-    pnh.param<std::string>("default_save_path", default_save_path_, "unsup_mvs_cloud.ply");
-    pnh.param("max_image_pixels", max_image_pixels_, kMaxDepthMapPixels);
     try {
-      if (max_image_pixels_ < 1) throw std::invalid_argument("max_image_pixels must be >= 1");
+      const FusionNodeConfig c = fusion_node_config_from_ros(pnh);
+      world_frame_ = c.world_frame;
+      save_dir_ = c.save_dir;
+      default_save_path_ = c.default_save_path;
+      max_image_pixels_ = c.max_image_pixels;
+      publish_rate = c.publish_rate;
       umvs::make_directories(save_dir_);
-      if (window < 1) throw std::invalid_argument("window must be >= 1");
-      if (max_points < 1) throw std::invalid_argument("max_points must be >= 1");
-      if (!(publish_rate > 0)) throw std::invalid_argument("publish_rate must be > 0");
-      fusion_ = std::make_unique<umvs::StreamingFusion>(fusion_config_from_ros(pnh), window,
-                                                        static_cast<size_t>(max_points), umvs::parse_device(device_name));
+      fusion_ = std::make_unique<umvs::StreamingFusion>(c.fusion, c.window, static_cast<size_t>(c.max_points),
+                                                        umvs::parse_device(c.device));
     } catch (const std::exception& e) {
       NODELET_FATAL("fusion: invalid parameters: %s", e.what());
       throw;
@@ -196,8 +187,7 @@ class FusionNodelet : public nodelet::Nodelet {
   std::string world_frame_, save_dir_, default_save_path_;
   // Depth maps are a quarter of the network input; 2048 x 2048 keeps the window (about 21 bytes per
   // pixel per estimate, docs/fusion.md) under 1 GB at the default window of 8.
-  static constexpr int kMaxDepthMapPixels = 2048 * 2048;
-  int max_image_pixels_ = kMaxDepthMapPixels;
+  int max_image_pixels_ = FusionNodeConfig{}.max_image_pixels;
   std::mutex mutex_;
   std::unique_ptr<umvs::StreamingFusion> fusion_;
   long estimates_ = 0;

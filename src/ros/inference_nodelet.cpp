@@ -66,35 +66,18 @@ class InferenceNodelet : public nodelet::Nodelet {
   void onInit() override {
     ros::NodeHandle& nh = getNodeHandle();
     ros::NodeHandle& pnh = getPrivateNodeHandle();
-    std::string device_name;
-    pnh.param<std::string>("device", device_name, "cpu");
-    pnh.param("threads", threads_, 0);
-    pnh.param("num_depth", config_.num_depth, 0);
-    pnh.param("max_width", config_.max_width, 640);
-    pnh.param("max_height", config_.max_height, 512);
-    // As the keyframe_selector reads the same CameraInfo (same parameter, same default).
-    pnh.param("rectified", rectified_, umvs::KeyframeStreamConfig{}.rectified);
-    pnh.param<std::string>("checkpoint", checkpoint_, "");
-    pnh.param("max_image_pixels", max_image_pixels_, kDefaultMaxImagePixels);
-    pnh.param("max_views", max_views_, 16);
-    pnh.param("max_planes", max_planes_, 256);
-    int max_checkpoint_mb = 256;
-    pnh.param("max_checkpoint_mb", max_checkpoint_mb, max_checkpoint_mb);
-    pnh.param("reload_timeout", reload_timeout_, 60.0);
     try {
-      device_ = umvs::parse_device(device_name);
-      if (config_.num_depth != 0 && (config_.num_depth < 8 || config_.num_depth % 8 != 0)) {
-        throw std::invalid_argument("num_depth must be 0 (the checkpoint's) or a positive multiple of 8");
-      }
-      if (max_image_pixels_ < 1 || max_views_ < 2 || max_planes_ < 8 || max_checkpoint_mb < 1 || !(reload_timeout_ > 0)) {
-        throw std::invalid_argument("need max_image_pixels >= 1, max_views >= 2, max_planes >= 8, max_checkpoint_mb >= 1 "
-                                    "and reload_timeout > 0");
-      }
-      if (config_.num_depth > max_planes_) {
-        throw std::invalid_argument("num_depth " + std::to_string(config_.num_depth) + " is more than max_planes " +
-                                    std::to_string(max_planes_));
-      }
-      max_checkpoint_bytes_ = static_cast<uint64_t>(max_checkpoint_mb) << 20;
+      const InferenceNodeConfig c = inference_node_config_from_ros(pnh);
+      device_ = umvs::parse_device(c.device);
+      threads_ = c.threads;
+      config_ = c.estimator;
+      rectified_ = c.rectified;
+      checkpoint_ = c.checkpoint;
+      max_image_pixels_ = c.max_image_pixels;
+      max_views_ = c.max_views;
+      max_planes_ = c.max_planes;
+      max_checkpoint_bytes_ = static_cast<uint64_t>(c.max_checkpoint_mb) << 20;
+      reload_timeout_ = c.reload_timeout;
     } catch (const std::exception& e) {
       NODELET_FATAL("inference: invalid parameters: %s", e.what());
       throw;

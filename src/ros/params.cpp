@@ -4,7 +4,9 @@
 #include <ros/ros.h>
 
 #include <cstdlib>
+#include <stdexcept>
 
+#include "unsup_mvs/core/device.h"
 #include "unsup_mvs/ros/nodelets.h"
 
 namespace umvs_ros {
@@ -48,6 +50,64 @@ umvs::FusionConfig fusion_config_from_ros(const ros::NodeHandle& nh) {
   std::string rule = umvs::to_string(c.source_rule);
   nh.param("source_rule", rule, rule);
   c.source_rule = umvs::fusion_source_rule_from_string(rule);
+  c.validate();
+  return c;
+}
+
+void InferenceNodeConfig::validate() const {
+  umvs::parse_device(device);
+  if (estimator.num_depth != 0 && (estimator.num_depth < 8 || estimator.num_depth % 8 != 0)) {
+    throw std::invalid_argument("num_depth must be 0 (the checkpoint's) or a positive multiple of 8");
+  }
+  if (max_image_pixels < 1 || max_views < 2 || max_planes < 8 || max_checkpoint_mb < 1 || !(reload_timeout > 0)) {
+    throw std::invalid_argument("need max_image_pixels >= 1, max_views >= 2, max_planes >= 8, max_checkpoint_mb >= 1 "
+                                "and reload_timeout > 0");
+  }
+  if (estimator.num_depth > max_planes) {
+    throw std::invalid_argument("num_depth " + std::to_string(estimator.num_depth) + " is more than max_planes " +
+                                std::to_string(max_planes));
+  }
+}
+
+InferenceNodeConfig inference_node_config_from_ros(const ros::NodeHandle& nh) {
+  InferenceNodeConfig c;
+  nh.param("device", c.device, c.device);
+  nh.param("threads", c.threads, c.threads);
+  nh.param("num_depth", c.estimator.num_depth, c.estimator.num_depth);
+  nh.param("max_width", c.estimator.max_width, c.estimator.max_width);
+  nh.param("max_height", c.estimator.max_height, c.estimator.max_height);
+  nh.param("rectified", c.rectified, c.rectified);
+  nh.param("checkpoint", c.checkpoint, c.checkpoint);
+  nh.param("max_image_pixels", c.max_image_pixels, c.max_image_pixels);
+  nh.param("max_views", c.max_views, c.max_views);
+  nh.param("max_planes", c.max_planes, c.max_planes);
+  nh.param("max_checkpoint_mb", c.max_checkpoint_mb, c.max_checkpoint_mb);
+  nh.param("reload_timeout", c.reload_timeout, c.reload_timeout);
+  c.validate();
+  return c;
+}
+
+void FusionNodeConfig::validate() const {
+  fusion.validate();
+  umvs::parse_device(device);
+  if (max_image_pixels < 1) throw std::invalid_argument("max_image_pixels must be >= 1");
+  if (window < 1) throw std::invalid_argument("window must be >= 1");
+  if (max_points < 1) throw std::invalid_argument("max_points must be >= 1");
+  if (!(publish_rate > 0)) throw std::invalid_argument("publish_rate must be > 0");
+}
+
+FusionNodeConfig fusion_node_config_from_ros(const ros::NodeHandle& nh) {
+  FusionNodeConfig c;
+  c.fusion = fusion_config_from_ros(nh);
+  nh.param("world_frame", c.world_frame, c.world_frame);
+  nh.param("window", c.window, c.window);
+  nh.param("max_points", c.max_points, c.max_points);
+  nh.param("publish_rate", c.publish_rate, c.publish_rate);
+  nh.param("device", c.device, c.device);
+  nh.param("save_dir", c.save_dir, c.save_dir);
+  if (c.save_dir.empty()) c.save_dir = ros_home() + "/unsup_mvs_clouds";
+  nh.param("default_save_path", c.default_save_path, c.default_save_path);
+  nh.param("max_image_pixels", c.max_image_pixels, c.max_image_pixels);
   c.validate();
   return c;
 }

@@ -7,6 +7,7 @@
 
 #include <string>
 
+#include "unsup_mvs/core/depth_estimator.h"
 #include "unsup_mvs/core/fusion.h"
 #include "unsup_mvs/core/keyframes.h"
 
@@ -25,5 +26,37 @@ umvs::KeyframeConfig keyframe_config_from_ros(const ros::NodeHandle& nh);
 // launch files load the same YAML into both).
 umvs::KeyframeStreamConfig keyframe_stream_config_from_ros(const ros::NodeHandle& nh);
 umvs::FusionConfig fusion_config_from_ros(const ros::NodeHandle& nh);
+
+// The inference nodelet's parameters (docs/ros.md), validated: validate() throws
+// std::invalid_argument naming the parameter.
+struct InferenceNodeConfig {
+  std::string device = "cpu";
+  int threads = 0;                            // 0 = all cores
+  umvs::DepthEstimatorConfig estimator{640, 512, 0};  // max_width, max_height, num_depth (0 = the model's)
+  bool rectified = umvs::KeyframeStreamConfig{}.rectified;  // as the keyframe_selector reads CameraInfo
+  std::string checkpoint;
+  int max_image_pixels = kDefaultMaxImagePixels;
+  int max_views = 16;
+  int max_planes = 256;
+  int max_checkpoint_mb = 256;
+  double reload_timeout = 60.0;  // s
+  void validate() const;
+};
+InferenceNodeConfig inference_node_config_from_ros(const ros::NodeHandle& nh);
+
+// The fusion nodelet's parameters besides the FusionConfig thresholds.
+struct FusionNodeConfig {
+  umvs::FusionConfig fusion;
+  std::string world_frame = "world";
+  int window = 8;                 // depth maps kept for confirming points
+  int max_points = 2000000;
+  double publish_rate = 1.0;      // Hz
+  std::string device = "cpu";
+  std::string save_dir;           // "" = $ROS_HOME/unsup_mvs_clouds
+  std::string default_save_path = "unsup_mvs_cloud.ply";
+  int max_image_pixels = 2048 * 2048;
+  void validate() const;
+};
+FusionNodeConfig fusion_node_config_from_ros(const ros::NodeHandle& nh);
 
 }  // namespace umvs_ros
