@@ -59,14 +59,14 @@ class FusionNodelet : public nodelet::Nodelet {
   void onInit() override {
     ros::NodeHandle& nh = getNodeHandle();
     ros::NodeHandle& pnh = getPrivateNodeHandle();
-    double publish_rate = 1.0;
+    FusionNodeConfig node;
     try {
-      const FusionNodeConfig c = fusion_node_config_from_ros(pnh);
+      node = fusion_node_config_from_ros(pnh);
+      const FusionNodeConfig& c = node;
       world_frame_ = c.world_frame;
       save_dir_ = c.save_dir;
       default_save_path_ = c.default_save_path;
       max_image_pixels_ = c.max_image_pixels;
-      publish_rate = c.publish_rate;
       umvs::make_directories(save_dir_);
       fusion_ = std::make_unique<umvs::StreamingFusion>(c.fusion, c.window, static_cast<size_t>(c.max_points),
                                                         umvs::parse_device(c.device));
@@ -79,13 +79,13 @@ class FusionNodelet : public nodelet::Nodelet {
     estimate_sub_ = nh.subscribe("depth_estimate", 5, &FusionNodelet::onEstimate, this);
     save_srv_ = pnh.advertiseService("save_cloud", &FusionNodelet::onSave, this);
     reset_srv_ = pnh.advertiseService("reset", &FusionNodelet::onReset, this);
-    timer_ = nh.createWallTimer(ros::WallDuration(1.0 / publish_rate), &FusionNodelet::onTimer, this);
+    timer_ = nh.createWallTimer(ros::WallDuration(1.0 / node.publish_rate), &FusionNodelet::onTimer, this);
     const auto& c = fusion_->config();
     NODELET_INFO("fusion: window %d, at most %d points, voxel %.3f m, a point needs %d agreeing views "
                  "(%.1f px, %.1f%% depth, confidence >= %.2f), map published at %.1f Hz in '%s', clouds saved "
                  "into %s",
-                 window, max_points, c.voxel_size, c.min_agreeing_views, c.max_reprojection_px,
-                 100 * c.max_relative_depth, c.min_confidence, publish_rate, world_frame_.c_str(), save_dir_.c_str());
+                 node.window, node.max_points, c.voxel_size, c.min_agreeing_views, c.max_reprojection_px,
+                 100 * c.max_relative_depth, c.min_confidence, node.publish_rate, world_frame_.c_str(), save_dir_.c_str());
   }
 
   void onEstimate(const unsup_mvs::DepthEstimateConstPtr& msg) {

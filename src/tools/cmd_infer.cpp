@@ -98,8 +98,8 @@ UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
     umvs::check_inference_memory(plan.width, plan.height, estimator.num_depth(), views);
   }
   const std::string out = args.str("out");
-  const umvs::InferenceFolder folder(out);
-  folder.create();
+  const umvs::InferenceFolder written(out);
+  written.create();
 
   std::vector<umvs::ViewPair> out_pairs;
   umvs::Progress progress("infer", static_cast<int64_t>(refs.size()));
@@ -139,19 +139,19 @@ UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
 
     const umvs::DepthMap map = estimator.estimate(inputs, dmin, dmax);
     total_seconds += map.seconds;
-    umvs::write_pfm(folder.depth_path(ref), map.depth);
-    umvs::write_pfm(folder.confidence_path(ref), map.confidence);
-    umvs::write_png(folder.depth_preview_path(ref), umvs::colorize(map.depth, dmin, dmax, map.confidence > 0.5));
-    umvs::write_png(folder.confidence_preview_path(ref),
+    umvs::write_pfm(written.depth_path(ref), map.depth);
+    umvs::write_pfm(written.confidence_path(ref), map.confidence);
+    umvs::write_png(written.depth_preview_path(ref), umvs::colorize(map.depth, dmin, dmax, map.confidence > 0.5));
+    umvs::write_png(written.confidence_preview_path(ref),
                     map.confidence.mul(255).round().clamp(0, 255).to(torch::kUInt8));
-    umvs::write_png(folder.image_path(ref), map.color);
+    umvs::write_png(written.image_path(ref), map.color);
     umvs::MvsCam out_cam;
     out_cam.camera = map.camera;
     out_cam.depth_min = dmin;
     out_cam.depth_interval = (dmax - dmin) / (estimator.num_depth() - 1);
     out_cam.depth_num = estimator.num_depth();
     out_cam.depth_max = dmax;
-    umvs::write_cam_file(folder.cam_path(ref), out_cam);
+    umvs::write_cam_file(written.cam_path(ref), out_cam);
     out_pairs.push_back(pair);
     ++done;
     char extra[96];
@@ -160,7 +160,7 @@ UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
     progress.update(done + skipped, extra);
   }
   progress.finish();
-  umvs::write_pair_file(folder.pair_file(), out_pairs);
+  umvs::write_pair_file(written.pair_file(), out_pairs);
   std::cout << "wrote " << done << " depth maps to " << out << " (" << skipped << " skipped), "
             << (done ? total_seconds / done : 0.0) << " s per depth map\n";
   return done > 0 ? 0 : 1;
