@@ -3,9 +3,8 @@
 // launch/pipeline.launch; then save_cloud, and the saved PLY is compared with the scene's ground
 // truth depth maps.
 //
-// The model: MVSNet_pytorch's published weights from ../shared/data when present (then the cloud
-// must lie on the true surfaces); otherwise a random-weight model created here, which checks the
-// plumbing only (its depth is meaningless), and the geometry assertion is skipped with a message.
+// The model: MVSNet_pytorch's published weights from ../shared/data when present, otherwise the
+// shipped default model (models/unsup_mvsnet.pt); either way the cloud must lie on the true surfaces.
 #include <ros/callback_queue.h>
 #include <rosbag/bag.h>
 #include <rosbag/view.h>
@@ -53,13 +52,9 @@ TEST(Pipeline, SyntheticBagToFusedCloud) {
   // The model.
   std::string model = g_source_dir + "/../shared/data/mvsnet_parity/mvsnet_pytorch_d192.pt";
   if (const char* env = std::getenv("UMVS_SHARED_DATA")) model = std::string(env) + "/mvsnet_parity/mvsnet_pytorch_d192.pt";
-  const bool trained = !g_source_dir.empty() && fs::exists(model);
-  if (!trained) {
-    torch::manual_seed(0);
-    umvs::MvsNet net(umvs::MvsNetConfig{});
-    model = dir + "/random_model.pt";
-    umvs::save_checkpoint(model, net);
-  }
+  const bool published = fs::exists(model);
+  if (!published) model = g_source_dir + "/models/unsup_mvsnet.pt";
+  ASSERT_TRUE(fs::exists(model)) << model;
   auto reload = nh.serviceClient<unsup_mvs::ReloadModel>("/unsup_mvs/inference/reload_model");
   ASSERT_TRUE(reload.waitForExistence(ros::Duration(60.0))) << "pipeline did not come up";
   unsup_mvs::ReloadModel srv;
@@ -159,7 +154,7 @@ TEST(Pipeline, SyntheticBagToFusedCloud) {
   std::printf("[pipeline test] %d frames -> %zu keyframe sets -> %zu depth maps -> %lu points; latency per keyframe "
               "(image to depth estimate) %.2f s, network %.2f s; model %s\n",
               frames, sets.size(), estimates.size(), static_cast<unsigned long>(save_srv.response.num_points),
-              latency_sum / estimates.size(), network_sum / estimates.size(), trained ? "MVSNet_pytorch" : "random weights");
+              latency_sum / estimates.size(), network_sum / estimates.size(), published ? "MVSNet_pytorch" : "the default model");
 
   {
     std::lock_guard<std::mutex> lock(timing_mutex);
@@ -174,10 +169,6 @@ TEST(Pipeline, SyntheticBagToFusedCloud) {
   }
   timing_spinner.stop();
 
-  if (!trained) {
-    GTEST_SKIP() << "../shared/data/mvsnet_parity not found: the pipeline ran with random weights, so the cloud's "
-                    "geometry is not checked (plumbing only)";
-  }
   ASSERT_TRUE(save_srv.response.success) << save_srv.response.message;
   std::string clouds_dir;
   ASSERT_TRUE(nh.getParam("/unsup_mvs/fusion/save_dir", clouds_dir));
