@@ -262,8 +262,8 @@ TEST(BagTraining, UmvsTrainReadsTheBagWithTheSelectorSettingsItIsGiven) {
   };
   umvs::BagDataConfig coarse = room_config();
   coarse.holdout_every = 0;
-  coarse.keyframes.min_translation = 0.3;
-  coarse.keyframes.min_rotation_deg = 25.0;
+  coarse.keyframes.min_translation = 0.6;  // 7 of the 14 frames
+  coarse.keyframes.min_rotation_deg = 40.0;
   umvs::BagDataConfig fine = coarse;
   fine.keyframes.min_translation = 0.05;
   fine.keyframes.min_rotation_deg = 5.0;
