@@ -38,7 +38,7 @@ EVAL_TUPLES="${EVAL_TUPLES:-0}"
 for d in mvsnet_parity livingroom templeRing; do
   [ -d "$SHARED/$d" ] || { echo "needs $SHARED/$d" >&2; exit 1; }
 done
-mkdir -p "$WORK/data" "$WORK/models"
+mkdir -p "$WORK/data" "$WORK/models" "$WORK/ft" "$WORK/eval"
 
 checkpoint() {  # model -> path
   case "$1" in
