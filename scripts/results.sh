@@ -142,7 +142,7 @@ judge() {
     NR == FNR { r0 = $col["abs_rel"]; p0 = $col["photometric"]; c0 = $col["consistent"]; next }
     { r1 = $col["abs_rel"]; p1 = $col["photometric"]; c1 = $col["consistent"] }
     END {
-      accept = (p1 < p0 && c1 > c0); better = (r1 < r0)
+      accept = (p1 < p0 && c1 > c0 && c1 >= 0.01); better = (r1 < r0)  # as the trainer node: 1 % evidence floor
       printf "| %s | %s | %.3f -> %.3f | %.4f -> %.4f | %.1f%% -> %.1f%% | %s | %s |\n", what, target, r0, r1, p0, p1,
              100 * c0, 100 * c1, accept ? "reload" : "keep", (accept == better) ? "yes" : "no"
     }' "$before" "$after"
@@ -168,7 +168,7 @@ start=$(date +%s)
   done
   echo
   echo "The label-free reload rule (trainer node): accept an adapted model only when its held-out photometric"
-  echo "loss is lower AND its multi-view consistency higher than the model it replaces; checked against the"
+  echo "loss is lower AND its multi-view consistency higher (and at least 1 %) than the model it replaces; checked against the"
   echo "ground truth it never sees (abs rel before -> after):"
   echo
   echo "| adaptation | target | abs rel before -> after | photometric before -> after | consistent before -> after | rule | right? |"
