@@ -1,9 +1,9 @@
 #include "unsup_mvs/io/run_folder.h"
 
-#include <sstream>
 #include <algorithm>
 #include <filesystem>
 #include <fstream>
+#include <sstream>
 #include <stdexcept>
 
 #include "unsup_mvs/io/atomic_file.h"

@@ -64,7 +64,11 @@ Trainer::Trainer(ros::NodeHandle nh, ros::NodeHandle pnh) : nh_(nh), pnh_(pnh) {
   pnh_.getParam("train_args", extra_train_args_);
   // The bags are read as the keyframe_selector reads the live stream: the launch files load its
   // YAML (and ~rectified) into ~keyframes/ too.
-  keyframe_stream_ = keyframe_stream_config_from_ros(ros::NodeHandle(pnh_, "keyframes"));
+  try {
+    keyframe_stream_ = keyframe_stream_config_from_ros(ros::NodeHandle(pnh_, "keyframes"));
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(std::string("invalid ~keyframes/ parameters: ") + e.what());
+  }
   const auto stream_args = umvs::keyframe_stream_train_args(keyframe_stream_);
   for (size_t i = 0; i < stream_args.size(); i += 2) {
     if (std::find(extra_train_args_.begin(), extra_train_args_.end(), stream_args[i]) != extra_train_args_.end()) {
