@@ -157,25 +157,59 @@ TEST(RunTables, WriterAndReadersShareOneDefinition) {
   const std::string dir = test::temp_dir("run_tables");
   EXPECT_EQ(csv_header(train_log_columns()).rfind("step,total,photometric,", 0), 0u);
   EXPECT_EQ(csv_header(eval_columns()).rfind("checkpoint,tuples,photometric,", 0), 0u);
-  // Two steps, the last without validation (empty cells, one of them trailing).
-  std::ofstream(dir + "/log.csv") << csv_header({"step", "total", "val_abs_err", "supervised"}) << "\n1,0.5,0.25,0.1\n"
-                                  << "2,0.4,,\n\n";
-  CsvRow row({}, {});
+  // A training step with validation and one without: written and read back through the same table.
+  TrainLogRow validated;
+  validated.step = 7;
+  validated.total = 0.5;
+  validated.lr = 1e-3;
+  validated.val_abs_err = 0.25;
+  TrainLogRow plain;
+  plain.step = 8;
+  plain.total = 0.4;
+  const std::string line = format_csv_row(plain);
+  EXPECT_EQ(std::count(line.begin(), line.end(), ','), static_cast<long>(train_log_columns().size() - 1)) << line;
+  std::ofstream(dir + "/log.csv") << csv_header(train_log_columns()) << "\n"
+                                  << format_csv_row(validated) << "\n"
+                                  << line << "\n\n";
+  const auto rows = read_csv_rows(dir + "/log.csv");
+  ASSERT_EQ(rows.size(), 2u);
+  const TrainLogRow first = train_log_row(rows[0]), last = train_log_row(rows[1]);
+  EXPECT_EQ(first.step, 7);
+  EXPECT_DOUBLE_EQ(*first.val_abs_err, 0.25);
+  EXPECT_DOUBLE_EQ(*first.lr, 1e-3);
+  EXPECT_FALSE(first.val_total.has_value());
+  EXPECT_EQ(last.step, 8);
+  EXPECT_DOUBLE_EQ(*last.total, 0.4);
+  EXPECT_FALSE(last.val_abs_err.has_value());  // not measured at that step
+  EXPECT_FALSE(last.supervised.has_value());   // the trailing empty cell
+  CsvRow row;
   ASSERT_TRUE(read_last_csv_row(dir + "/log.csv", &row));
-  double v = -1;
-  EXPECT_TRUE(row.number("step", &v));
-  EXPECT_EQ(v, 2);
-  EXPECT_TRUE(row.number("total", &v));
-  EXPECT_DOUBLE_EQ(v, 0.4);
-  v = -1;
-  EXPECT_FALSE(row.number("val_abs_err", &v));  // not measured at that step
-  EXPECT_FALSE(row.number("supervised", &v));
-  EXPECT_FALSE(row.number("no_such_column", &v));
-  EXPECT_EQ(v, -1);
-  std::ofstream(dir + "/bad.csv") << "photometric\n0.1x\n";
-  ASSERT_TRUE(read_last_csv_row(dir + "/bad.csv", &row));
-  EXPECT_FALSE(row.number("photometric", &v));
+  EXPECT_EQ(row.number("step"), 8.0);
+  EXPECT_FALSE(row.number("no_such_column").has_value());
+
+  EvalRow eval;
+  eval.checkpoint = "/models/a.pt";
+  eval.photometric = 0.125;
+  eval.consistent = 0.5;
+  std::ofstream(dir + "/eval.csv") << csv_header(eval_columns()) << "\n" << format_csv_row(eval) << "\n";
+  ASSERT_TRUE(read_last_csv_row(dir + "/eval.csv", &row));
+  const EvalRow read = eval_row(row);
+  EXPECT_EQ(read.checkpoint, "/models/a.pt");
+  EXPECT_DOUBLE_EQ(*read.photometric, 0.125);
+  EXPECT_DOUBLE_EQ(*read.consistent, 0.5);
+  EXPECT_FALSE(read.abs_err.has_value());
+  eval.checkpoint = "a,b.pt";
+  EXPECT_THAT([&] { format_csv_row(eval); },
+              testing::ThrowsMessage<std::invalid_argument>(testing::HasSubstr("'a,b.pt' has a comma")));
+
+  std::ofstream(dir + "/bad.csv") << "step,photometric\n1,0.1x\n,0.2\n";
+  const auto bad = read_csv_rows(dir + "/bad.csv");
+  EXPECT_FALSE(bad.at(0).number("photometric").has_value());
+  EXPECT_THAT([&] { train_log_row(bad.at(1)); },
+              testing::ThrowsMessage<std::runtime_error>(testing::HasSubstr("without a step")));
   EXPECT_FALSE(read_last_csv_row(dir + "/missing.csv", &row));
+  EXPECT_THAT([&] { read_csv_rows(dir + "/missing.csv"); },
+              testing::ThrowsMessage<std::runtime_error>(testing::HasSubstr("cannot read " + dir + "/missing.csv")));
   std::ofstream(dir + "/header_only.csv") << "step,total\n";
   EXPECT_FALSE(read_last_csv_row(dir + "/header_only.csv", &row));
 }

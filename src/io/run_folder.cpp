@@ -114,16 +114,81 @@ void remove_run_files(const std::string& out) {
   }
 }
 
+namespace {
+
+template <class Row>
+using NumberFields = std::vector<std::pair<std::string, std::optional<double> Row::*>>;
+
+// The numeric columns after the first (step, checkpoint): one list per table, so that the header,
+// the writer and the readers cannot disagree.
+const NumberFields<TrainLogRow>& train_log_fields() {
+  static const NumberFields<TrainLogRow> fields = {
+      {"total", &TrainLogRow::total},
+      {"photometric", &TrainLogRow::photometric},
+      {"ssim", &TrainLogRow::ssim},
+      {"smoothness", &TrainLogRow::smoothness},
+      {"valid_fraction", &TrainLogRow::valid_fraction},
+      {"lr", &TrainLogRow::lr},
+      {"seconds", &TrainLogRow::seconds},
+      {"val_photometric", &TrainLogRow::val_photometric},
+      {"val_total", &TrainLogRow::val_total},
+      {"val_abs_err", &TrainLogRow::val_abs_err},
+      {"val_within_1pct", &TrainLogRow::val_within_1pct},
+      {"supervised", &TrainLogRow::supervised}};
+  return fields;
+}
+
+const NumberFields<EvalRow>& eval_fields() {
+  static const NumberFields<EvalRow> fields = {
+      {"tuples", &EvalRow::tuples},           {"photometric", &EvalRow::photometric},
+      {"ssim", &EvalRow::ssim},               {"smoothness", &EvalRow::smoothness},
+      {"total", &EvalRow::total},             {"abs_err", &EvalRow::abs_err},
+      {"abs_rel", &EvalRow::abs_rel},         {"within_1pct", &EvalRow::within_1pct},
+      {"consistent", &EvalRow::consistent}};
+  return fields;
+}
+
+template <class Row>
+std::vector<std::string> columns_of(const std::string& first, const NumberFields<Row>& fields) {
+  std::vector<std::string> columns = {first};
+  for (const auto& f : fields) columns.push_back(f.first);
+  return columns;
+}
+
+// ",v1,v2,...": empty cells for values not measured.
+template <class Row>
+std::string format_fields(const Row& row, const NumberFields<Row>& fields) {
+  std::ostringstream s;
+  s.precision(7);
+  for (const auto& f : fields) {
+    s << ",";
+    if (const auto& v = row.*(f.second)) s << *v;
+  }
+  return s.str();
+}
+
+template <class Row>
+void parse_fields(const CsvRow& csv, const NumberFields<Row>& fields, Row* row) {
+  for (const auto& f : fields) row->*(f.second) = csv.number(f.first);
+}
+
+std::vector<std::string> split_csv_line(const std::string& line) {
+  std::vector<std::string> fields;
+  std::stringstream s(line);
+  for (std::string f; std::getline(s, f, ',');) fields.push_back(f);
+  if (!line.empty() && line.back() == ',') fields.emplace_back();  // a trailing empty cell
+  return fields;
+}
+
+}  // namespace
+
 const std::vector<std::string>& train_log_columns() {
-  static const std::vector<std::string> columns = {
-      "step",    "total",           "photometric", "ssim",        "smoothness",      "valid_fraction", "lr",
-      "seconds", "val_photometric", "val_total",   "val_abs_err", "val_within_1pct", "supervised"};
+  static const std::vector<std::string> columns = columns_of("step", train_log_fields());
   return columns;
 }
 
 const std::vector<std::string>& eval_columns() {
-  static const std::vector<std::string> columns = {"checkpoint", "tuples",  "photometric", "ssim",        "smoothness",
-                                                   "total",      "abs_err", "abs_rel",     "within_1pct", "consistent"};
+  static const std::vector<std::string> columns = columns_of("checkpoint", eval_fields());
   return columns;
 }
 
@@ -133,33 +198,27 @@ std::string csv_header(const std::vector<std::string>& columns) {
   return s;
 }
 
-namespace {
-std::vector<std::string> split_csv_line(const std::string& line) {
-  std::vector<std::string> fields;
-  std::stringstream s(line);
-  for (std::string f; std::getline(s, f, ',');) fields.push_back(f);
-  if (!line.empty() && line.back() == ',') fields.emplace_back();  // a trailing empty cell
-  return fields;
-}
-}  // namespace
-
 CsvRow::CsvRow(std::vector<std::string> names, std::vector<std::string> values)
     : names_(std::move(names)), values_(std::move(values)) {}
 
-bool CsvRow::number(const std::string& name, double* value) const {
+std::string CsvRow::text(const std::string& name) const {
   for (size_t i = 0; i < names_.size() && i < values_.size(); ++i) {
-    if (names_[i] != name || values_[i].empty()) continue;
-    try {
-      size_t used = 0;
-      const double v = std::stod(values_[i], &used);
-      if (used != values_[i].size()) return false;
-      *value = v;
-      return true;
-    } catch (const std::exception&) {
-      return false;
-    }
+    if (names_[i] == name) return values_[i];
   }
-  return false;
+  return "";
+}
+
+std::optional<double> CsvRow::number(const std::string& name) const {
+  const std::string cell = text(name);
+  if (cell.empty()) return std::nullopt;
+  try {
+    size_t used = 0;
+    const double v = std::stod(cell, &used);
+    if (used != cell.size()) return std::nullopt;
+    return v;
+  } catch (const std::exception&) {
+    return std::nullopt;
+  }
 }
 
 bool read_last_csv_row(const std::string& path, CsvRow* row) {
@@ -172,6 +231,47 @@ bool read_last_csv_row(const std::string& path, CsvRow* row) {
   if (last.empty()) return false;
   *row = CsvRow(split_csv_line(header), split_csv_line(last));
   return true;
+}
+
+std::vector<CsvRow> read_csv_rows(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw std::runtime_error("cannot read " + path);
+  std::string header, line;
+  std::getline(in, header);
+  const auto names = split_csv_line(header);
+  std::vector<CsvRow> rows;
+  while (std::getline(in, line)) {
+    if (!line.empty()) rows.emplace_back(names, split_csv_line(line));
+  }
+  if (in.bad()) throw std::runtime_error("cannot read " + path);
+  return rows;
+}
+
+std::string format_csv_row(const TrainLogRow& row) {
+  return std::to_string(row.step) + format_fields(row, train_log_fields());
+}
+
+TrainLogRow train_log_row(const CsvRow& csv) {
+  TrainLogRow row;
+  const auto step = csv.number("step");
+  if (!step) throw std::runtime_error("training log row without a step: '" + csv.text("step") + "'");
+  row.step = static_cast<int64_t>(*step);
+  parse_fields(csv, train_log_fields(), &row);
+  return row;
+}
+
+std::string format_csv_row(const EvalRow& row) {
+  if (row.checkpoint.find_first_of(",\n") != std::string::npos) {
+    throw std::invalid_argument("eval.csv: the checkpoint path '" + row.checkpoint + "' has a comma or line break");
+  }
+  return row.checkpoint + format_fields(row, eval_fields());
+}
+
+EvalRow eval_row(const CsvRow& csv) {
+  EvalRow row;
+  row.checkpoint = csv.text("checkpoint");
+  parse_fields(csv, eval_fields(), &row);
+  return row;
 }
 
 }  // namespace umvs

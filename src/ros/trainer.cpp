@@ -19,9 +19,13 @@ namespace umvs_ros {
 namespace fs = std::filesystem;
 
 bool read_eval_scores(const std::string& eval_csv, EvalScores* scores) {
-  umvs::CsvRow row({}, {});
-  return umvs::read_last_csv_row(eval_csv, &row) && row.number("photometric", &scores->photometric) &&
-         row.number("consistent", &scores->consistent);
+  umvs::CsvRow row;
+  if (!umvs::read_last_csv_row(eval_csv, &row)) return false;
+  const umvs::EvalRow eval = umvs::eval_row(row);
+  if (!eval.photometric || !eval.consistent) return false;
+  scores->photometric = *eval.photometric;
+  scores->consistent = *eval.consistent;
+  return true;
 }
 
 namespace {
@@ -196,18 +200,19 @@ bool Trainer::on_status(std_srvs::Trigger::Request&, std_srvs::Trigger::Response
 }
 
 void Trainer::read_training_log() {
-  umvs::CsvRow row({}, {});
-  if (!umvs::read_last_csv_row(job_dir_ + "/train_log.csv", &row)) return;
-  auto value = [&](const std::string& name, double fallback) {
-    double v = fallback;
-    row.number(name, &v);
-    return v;
-  };
-  last_.step = static_cast<int>(value("step", last_.step));
-  last_.loss = static_cast<float>(value("total", last_.loss));
-  last_.photometric = static_cast<float>(value("photometric", last_.photometric));
-  last_.ssim = static_cast<float>(value("ssim", last_.ssim));
-  last_.smoothness = static_cast<float>(value("smoothness", last_.smoothness));
+  umvs::CsvRow csv;
+  if (!umvs::read_last_csv_row(job_dir_ + "/train_log.csv", &csv)) return;
+  umvs::TrainLogRow row;
+  try {
+    row = umvs::train_log_row(csv);
+  } catch (const std::runtime_error&) {
+    return;  // a row being written
+  }
+  last_.step = static_cast<int>(row.step);
+  last_.loss = static_cast<float>(row.total.value_or(last_.loss));
+  last_.photometric = static_cast<float>(row.photometric.value_or(last_.photometric));
+  last_.ssim = static_cast<float>(row.ssim.value_or(last_.ssim));
+  last_.smoothness = static_cast<float>(row.smoothness.value_or(last_.smoothness));
   const double elapsed = (ros::WallTime::now() - started_).toSec();
   last_.eta_seconds = last_.step > 0 ? static_cast<float>(elapsed / last_.step * (last_.total_steps - last_.step)) : -1.f;
 }

@@ -4,7 +4,9 @@
 // optimiser, seed, ...) as the one that wrote the folder.
 #pragma once
 
+#include <cstdint>
 #include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -47,19 +49,22 @@ void write_run_config(const std::string& path, const RunConfig& config);
 void remove_run_files(const std::string& out);
 
 // The tables of a run, defined once for `umvs train` (the writer) and their readers (the trainer
-// node, scripts): OUT/train_log.csv, one row per step, and OUT/eval.csv, the one row of
-// --eval-only. Empty cells are values not measured (no validation at that step, no ground truth).
+// node, resume, scripts): OUT/train_log.csv, one row per step, and OUT/eval.csv, the one row of
+// --eval-only. An empty cell is a value not measured (no validation at that step, no ground truth):
+// std::nullopt in the row structs.
 const std::vector<std::string>& train_log_columns();
 const std::vector<std::string>& eval_columns();
 std::string csv_header(const std::vector<std::string>& columns);  // "a,b,c"
 
-// A row of such a table, read by column name.
+// A row of a CSV table, read by column name.
 class CsvRow {
  public:
+  CsvRow() = default;
   CsvRow(std::vector<std::string> names, std::vector<std::string> values);
-  // The number in column `name`; false (and `value` untouched) when the column is missing, empty or
-  // not a number.
-  bool number(const std::string& name, double* value) const;
+  // The number in column `name`; nullopt when the column is missing, empty or not a number.
+  std::optional<double> number(const std::string& name) const;
+  // The text in column `name`; "" when missing.
+  std::string text(const std::string& name) const;
 
  private:
   std::vector<std::string> names_, values_;
@@ -67,5 +72,28 @@ class CsvRow {
 // The last non-empty row of a CSV file with a header line; false when the file is missing or has
 // no row.
 bool read_last_csv_row(const std::string& path, CsvRow* row);
+// Every non-empty row; throws std::runtime_error naming the file when it cannot be read.
+std::vector<CsvRow> read_csv_rows(const std::string& path);
+
+// One row of OUT/train_log.csv (columns train_log_columns(), in this order).
+struct TrainLogRow {
+  int64_t step = 0;
+  std::optional<double> total, photometric, ssim, smoothness, valid_fraction, lr, seconds;
+  std::optional<double> val_photometric, val_total, val_abs_err, val_within_1pct;  // at validation steps
+  std::optional<double> supervised;
+};
+std::string format_csv_row(const TrainLogRow& row);
+// Throws std::runtime_error when the row has no step.
+TrainLogRow train_log_row(const CsvRow& row);
+
+// The one row of OUT/eval.csv (columns eval_columns(), in this order).
+struct EvalRow {
+  std::string checkpoint;
+  std::optional<double> tuples, photometric, ssim, smoothness, total;
+  std::optional<double> abs_err, abs_rel, within_1pct;  // with ground truth only
+  std::optional<double> consistent;                     // share of depth that other views confirm
+};
+std::string format_csv_row(const EvalRow& row);
+EvalRow eval_row(const CsvRow& row);
 
 }  // namespace umvs
