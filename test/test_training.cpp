@@ -1,11 +1,13 @@
 // Training pieces (core/training.h, io/training_data.h) and `umvs train`, on synthetic scenes with
 // exact depth (core/synth.h) written as MVSNet folders.
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 #include <torch/torch.h>
 
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <sstream>
 
 #include "test_util.h"
 #include "unsup_mvs/core/synth.h"
@@ -15,6 +17,7 @@
 #include "unsup_mvs/io/loss_curve.h"
 #include "unsup_mvs/io/synth_writer.h"
 #include "unsup_mvs/io/training_data.h"
+#include "unsup_mvs/io/training_run.h"
 
 namespace umvs {
 namespace {
@@ -239,6 +242,72 @@ TEST(TrainCommand, MaxMinutesStopsWithACheckpointThatResumes) {
   EXPECT_EQ(load_model(out + "/run/last.pt", torch::kCPU).meta.step, stopped + 2);
   EXPECT_NE(run(common + "2 --steps 3 --max-minutes -1"), 0);
   EXPECT_FALSE(std::filesystem::exists(out + "/run2"));
+}
+
+TEST(TrainingRun, LogsEveryStepResumesAndRefusesAnOccupiedFolderBeforeReadingData) {
+  const std::string data = write_scene("training_run", 96, 64, 5, 2);
+  const std::string out = test::temp_dir("training_run_out") + "/run";
+  TrainingRunConfig config;
+  config.out = out;
+  config.trainer.loss = LossConfig::paper();
+  config.trainer.loss.top_k = 2;
+  config.trainer.num_depth = 8;
+  config.data.width = 96;
+  config.data.height = 64;
+  config.data.num_depth = 8;
+  config.data.views_loss = 3;
+  config.steps = 3;
+  config.save_every = 2;
+  config.options = {{"steps", "3"}, {"data", data}};
+  config.may_change_on_resume = {"steps"};
+  int opened = 0;
+  auto open_data = [&] {
+    ++opened;
+    TrainingData d;
+    d.train = std::make_unique<MvsFolderSource>(std::vector<std::string>{data}, config.data);
+    d.held_out = std::make_unique<MvsFolderSource>(std::vector<std::string>{data}, config.data);
+    return d;
+  };
+  std::ostringstream messages;
+  std::vector<TrainLogRow> seen;
+  {
+    TrainingRun run(config, open_data, messages);
+    const auto result = run.run([&](const TrainLogRow& row, int64_t done, int64_t to_do) {
+      seen.push_back(row);
+      EXPECT_EQ(done, row.step);
+      EXPECT_EQ(to_do, 3);
+    });
+    EXPECT_EQ(result.step, 3);
+    EXPECT_EQ(result.best_metric, "val_total");  // held-out data without depth_gt/ read
+    EXPECT_FALSE(result.out_of_time);
+  }
+  ASSERT_EQ(seen.size(), 3u);
+  EXPECT_FALSE(seen[0].val_total.has_value());  // validated at steps 2 and 3 (save_every, the end)
+  ASSERT_TRUE(seen[1].val_total.has_value());
+  ASSERT_TRUE(seen[2].val_total.has_value());
+  // The log is the rows the callback saw, through the one table definition.
+  const auto logged = read_csv_rows(out + "/train_log.csv");
+  ASSERT_EQ(logged.size(), 3u);
+  for (size_t i = 0; i < 3; ++i) {
+    const TrainLogRow row = train_log_row(logged[i]);
+    EXPECT_EQ(row.step, static_cast<int64_t>(i + 1));
+    EXPECT_NEAR(*row.total, *seen[i].total, 1e-6 * std::abs(*seen[i].total));
+  }
+  EXPECT_NEAR(checkpoint_metric(out + "/last.pt", "val_total"), *seen[2].val_total, 1e-9);
+
+  // The folder holds a run: a new one is refused before any data is opened.
+  EXPECT_THAT([&] { TrainingRun(config, open_data, messages); },
+              testing::ThrowsMessage<std::invalid_argument>(testing::HasSubstr("--resume")));
+  EXPECT_EQ(opened, 1);
+  // A resume continues the log from the checkpoint.
+  config.start = RunStart::kResume;
+  config.steps = 4;
+  config.options["steps"] = "4";
+  TrainingRun resumed(config, open_data, messages);
+  EXPECT_EQ(resumed.step(), 3);
+  EXPECT_EQ(resumed.run().step, 4);
+  EXPECT_EQ(read_csv_rows(out + "/train_log.csv").size(), 4u);
+  EXPECT_EQ(load_model(out + "/last.pt", torch::kCPU).meta.step, 4);
 }
 
 TEST(Training, LossCurveAndDepthErrors) {

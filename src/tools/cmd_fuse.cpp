@@ -91,6 +91,7 @@ std::vector<double> parse_bbox(const std::string& s) {
 }  // namespace
 
 UMVS_COMMAND(fuse, "fuse depth maps into one consistent point cloud (PLY)") {
+  const umvs::FusionConfig fusion_defaults;  // the thresholds' defaults are FusionConfig's
   umvs::Args args("fuse",
                   "Keeps the depth-map pixels that enough other views agree with (reprojection error and\n"
                   "relative depth difference after a round trip, see docs/fusion.md) and writes them as one\n"
@@ -102,13 +103,14 @@ UMVS_COMMAND(fuse, "fuse depth maps into one consistent point cloud (PLY)") {
   args.required("depth", "depth folder: `umvs infer` output or a folder of XXXXXXXX.pfm")
       .option("data", "", "MVSNet-format folder for cams/images/pair.txt missing from --depth")
       .required("out", "output PLY (written atomically; an existing file is kept when fusion fails)")
-      .option("min-confidence", "0.8", "pixels below this confidence are ignored")
-      .option("max-reprojection", "1.0", "max reprojection error after the round trip (pixels)")
-      .option("max-relative-depth", "0.01", "max relative depth difference")
-      .option("min-views", "3", "agreeing source views needed")
-      .option("max-sources", "10", "sources tested per reference (pair.txt order)")
-      .option("voxel", "0", "voxel edge for de-duplication in scene units (0 = off)")
-      .option("source-rule", "neighbours",
+      .option("min-confidence", fusion_defaults.min_confidence, "pixels below this confidence are ignored")
+      .option("max-reprojection", fusion_defaults.max_reprojection_px,
+              "max reprojection error after the round trip (pixels)")
+      .option("max-relative-depth", fusion_defaults.max_relative_depth, "max relative depth difference")
+      .option("min-views", fusion_defaults.min_agreeing_views, "agreeing source views needed")
+      .option("max-sources", fusion_defaults.max_source_views, "sources tested per reference (pair.txt order)")
+      .option("voxel", fusion_defaults.voxel_size, "voxel edge for de-duplication in scene units (0 = off)")
+      .option("source-rule", umvs::to_string(fusion_defaults.source_rule),
               "which source depths count: neighbours (the 4 source pixels around the projection are confident\n"
               "estimates) | mvsnet (MVSNet's eval.py: the raw source depth, as cv2.remap reads it)")
       .option("ref", "", "comma-separated view ids to fuse (default: all in pair.txt with a depth map)")

@@ -1,21 +1,19 @@
-// umvs train: unsupervised training / fine-tuning of MVSNet with the robust photometric loss.
+// umvs train: unsupervised training / fine-tuning of MVSNet with the robust photometric loss. The
+// command turns its options into a TrainingRunConfig and opens the data; io/training_run runs it.
 #include <torch/torch.h>
 
+#include <cmath>
 #include <filesystem>
-#include <fstream>
 #include <iostream>
-#include <sstream>
+#include <optional>
 
 #include "unsup_mvs/core/device.h"
 #include "unsup_mvs/core/keyframes.h"
-#include "unsup_mvs/core/memory_bounds.h"
 #include "unsup_mvs/core/training.h"
 #include "unsup_mvs/io/atomic_file.h"
-#include "unsup_mvs/io/checkpoint.h"
-#include "unsup_mvs/io/image_io.h"
-#include "unsup_mvs/io/loss_curve.h"
 #include "unsup_mvs/io/run_folder.h"
 #include "unsup_mvs/io/training_data.h"
+#include "unsup_mvs/io/training_run.h"
 #ifdef UMVS_HAVE_ROS
 #include "unsup_mvs/io/ros/bag_training_data.h"
 #endif
@@ -27,120 +25,8 @@ namespace fs = std::filesystem;
 
 namespace {
 
-struct LogRow {
-  int64_t step = 0;
-  umvs::LossValues loss;
-  double lr = 0, seconds = 0;
-  bool has_val = false;
-  umvs::Evaluation val;
-};
-
-// One row of train_log.csv, in the order of umvs::train_log_columns().
-std::string csv_line(const LogRow& r) {
-  std::ostringstream s;
-  s.precision(7);
-  s << r.step << "," << r.loss.total << "," << r.loss.photometric << "," << r.loss.ssim << "," << r.loss.smoothness
-    << "," << r.loss.valid_fraction << "," << r.lr << "," << r.seconds << ",";
-  if (r.has_val) {
-    s << r.val.loss.photometric << "," << r.val.loss.total << ",";
-    if (r.val.depth.pixels > 0) s << r.val.depth.mean_abs << "," << r.val.depth.within_1pct;
-    else s << ",";
-  } else {
-    s << ",,,";
-  }
-  s << "," << r.loss.supervised;
-  return s.str();
-}
-
-// Lower is better: GT depth error when the validation data has ground truth, else its photometric loss.
-double val_score(const umvs::Evaluation& ev) {
-  return ev.depth.pixels > 0 ? ev.depth.mean_abs : ev.loss.total;
-}
-
-std::string describe(const umvs::Evaluation& ev) {
-  std::ostringstream s;
-  s.precision(4);
-  s << "photometric " << ev.loss.photometric << ", ssim " << ev.loss.ssim << ", total " << ev.loss.total;
-  if (ev.depth.pixels > 0) {
-    s << ", depth |err| mean " << ev.depth.mean_abs << ", abs rel "
-      << ev.depth.abs_rel << ", within 1% "
-      << 100.0 * ev.depth.within_1pct << "%";
-  }
-  s << " (" << ev.tuples << " tuples)";
-  return s.str();
-}
-
-// The rng_state of a checkpoint: the sampler's text state, a NUL, then LibTorch's generator bytes.
-std::string pack_rng(const umvs::MixedSampler& sampler) { return sampler.state() + '\0' + umvs::torch_rng_state(); }
-void unpack_rng(const std::string& bytes, umvs::MixedSampler& sampler) {
-  const auto nul = bytes.find('\0');
-  if (nul == std::string::npos) throw std::runtime_error("checkpoint has no training RNG state: cannot resume exactly");
-  sampler.set_state(bytes.substr(0, nul));
-  umvs::set_torch_rng_state(bytes.substr(nul + 1));
-}
-
-std::vector<LogRow> read_log(const std::string& path, int64_t max_step, std::vector<std::string>* lines) {
-  std::vector<LogRow> rows;
-  std::ifstream in(path);
-  std::string line;
-  std::getline(in, line);  // header
-  while (std::getline(in, line)) {
-    std::vector<std::string> f;
-    std::stringstream ss(line);
-    for (std::string c; std::getline(ss, c, ',');) f.push_back(c);
-    if (f.size() < 8) continue;
-    LogRow r;
-    r.step = std::stoll(f[0]);
-    if (r.step > max_step) break;  // written after the checkpoint we resume from
-    r.loss.total = std::stod(f[1]);
-    if (f.size() > 9 && !f[9].empty()) {
-      r.has_val = true;
-      r.val.loss.total = std::stod(f[9]);
-      if (f.size() > 10 && !f[10].empty()) {
-        r.val.depth.mean_abs = std::stod(f[10]);
-        r.val.depth.pixels = 1;
-      }
-    }
-    rows.push_back(r);
-    lines->push_back(line);
-  }
-  return rows;
-}
-
-void write_curve(const std::string& path, const std::vector<LogRow>& rows) {
-  umvs::CurveSeries raw{{}, {}, 190, 190, 235}, smooth{{}, {}, 20, 60, 200}, val{{}, {}, 220, 40, 30};
-  double ema = 0;
-  for (size_t i = 0; i < rows.size(); ++i) {
-    const double v = rows[i].loss.total;
-    raw.x.push_back(rows[i].step);
-    raw.y.push_back(v);
-    ema = i == 0 ? v : 0.95 * ema + 0.05 * v;
-    smooth.x.push_back(rows[i].step);
-    smooth.y.push_back(ema);
-    if (rows[i].has_val) {
-      val.x.push_back(rows[i].step);
-      val.y.push_back(val_score(rows[i].val));
-    }
-  }
-  umvs::write_png(path, umvs::render_curves({raw, smooth, val}));
-}
-
-std::vector<umvs::TrainingTuple> fixed_tuples(const umvs::TupleSource& source, int limit) {
-  std::vector<umvs::TrainingTuple> out;
-  const size_t n = source.size();
-  const size_t count = limit > 0 ? std::min<size_t>(n, static_cast<size_t>(limit)) : n;
-  for (size_t i = 0; i < count; ++i) out.push_back(source.tuple(i * n / count, nullptr));
-  return out;
-}
-
-// The data: a training source and, when there is one, the held-out source validated on, and
-// rendered folders trained on their ground truth in the same run.
-struct Data {
-  std::unique_ptr<umvs::TupleSource> train, held_out, supervised;
-};
-
-Data open_folders(const umvs::Args& args, const umvs::TupleConfig& config) {
-  Data d;
+umvs::TrainingData open_folders(const umvs::Args& args, const umvs::TupleConfig& config) {
+  umvs::TrainingData d;
   umvs::TupleConfig train_config = config;
   train_config.supervised = args.str("loss") == "supervised";
   d.train = std::make_unique<umvs::MvsFolderSource>(args.all("data"), train_config);
@@ -148,7 +34,7 @@ Data open_folders(const umvs::Args& args, const umvs::TupleConfig& config) {
   return d;
 }
 
-Data open_bags(const umvs::Args& args, const umvs::TupleConfig& config, bool eval_only) {
+umvs::TrainingData open_bags(const umvs::Args& args, const umvs::TupleConfig& config, bool eval_only) {
 #ifdef UMVS_HAVE_ROS
   umvs::BagDataConfig bag;
   bag.topics.image = args.str("image-topic");
@@ -167,7 +53,7 @@ Data open_bags(const umvs::Args& args, const umvs::TupleConfig& config, bool eva
   bag.holdout_every = args.integer("holdout-every");
   auto keyframes = std::make_shared<const std::vector<umvs::BagKeyframe>>(
       umvs::read_bag_keyframes(args.all("bag"), bag, &std::cerr));
-  Data d;
+  umvs::TrainingData d;
   if (bag.holdout_every > 0) {
     d.held_out = std::make_unique<umvs::BagSource>(keyframes, umvs::BagSplit::kHeldOut, bag, config);
   }
@@ -204,18 +90,6 @@ umvs::RunConfig run_config_of(const umvs::Args& args) {
     config[name] = joined;
   }
   return config;
-}
-
-// The metric best.pt is chosen by, as a checkpoint's metrics show it: the held-out ground-truth
-// depth error, the held-out photometric loss, or (without validation data) the training loss.
-std::string score_metric(const umvs::CheckpointMeta& meta) {
-  if (meta.metrics.count("val_abs_err")) return "val_abs_err";
-  if (meta.metrics.count("val_total")) return "val_total";
-  return "train_total";
-}
-std::string score_metric(const LogRow& row) {
-  if (!row.has_val) return "train_total";
-  return row.val.depth.pixels > 0 ? "val_abs_err" : "val_total";
 }
 
 // The integer options and option combinations, before anything is read or written.
@@ -388,10 +262,6 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
     throw std::invalid_argument("--top-k " + std::to_string(tcfg.loss.top_k) + " exceeds --views-loss " +
                                 std::to_string(data_cfg.views_loss));
   }
-  if (data_cfg.width > 0 && data_cfg.height > 0) {
-    umvs::check_training_memory(data_cfg.width, data_cfg.height, tcfg.num_depth, data_cfg.views_in,
-                                data_cfg.views_loss, args.integer("batch"));
-  }
   const bool from_bags = args.given("bag");
   if (from_bags == args.given("data")) throw std::invalid_argument("give either --data folders or --bag files");
   if (from_bags && args.given("val")) {
@@ -402,263 +272,93 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
     throw std::invalid_argument("--loss supervised needs --data folders with depth_gt/; bags train photometrically "
                                 "(add rendered folders with --supervised-data)");
   }
-  const bool resume = args.on("resume");
-  const std::string out = args.str("out");
-  const umvs::RunConfig run_config = run_config_of(args);
-  if (!eval_only) {
-    std::string warnings;
-    umvs::check_run_folder(out, resume ? umvs::RunStart::kResume
-                                       : args.on("overwrite") ? umvs::RunStart::kOverwrite : umvs::RunStart::kFresh,
-                           run_config, kMayChangeOnResume, &warnings);
-    std::cerr << warnings;
-  }
-  Data data = from_bags ? open_bags(args, data_cfg, eval_only) : open_folders(args, data_cfg);
-  if (args.given("supervised-data") && !eval_only) {
-    umvs::TupleConfig supervised_cfg = data_cfg;
-    supervised_cfg.supervised = true;
-    data.supervised = std::make_unique<umvs::MvsFolderSource>(args.all("supervised-data"), supervised_cfg);
-    std::cerr << "supervised data: " << data.supervised->description() << ", share "
-              << args.real("supervised-share") << ", weight " << tcfg.supervised_weight << "\n";
-  }
-  // --eval-only scores held-out bag keyframes, or the --data folders themselves.
-  std::cerr << "data: " << (eval_only && from_bags ? *data.held_out : *data.train).description()
-            << "\nloss: " << tcfg.loss.to_string() << "\n";
+  // The data, opened only after the run folder is checked: a refused run reads nothing.
+  auto open_data = [&] {
+    umvs::TrainingData data = from_bags ? open_bags(args, data_cfg, eval_only) : open_folders(args, data_cfg);
+    if (args.given("supervised-data") && !eval_only) {
+      umvs::TupleConfig supervised_cfg = data_cfg;
+      supervised_cfg.supervised = true;
+      data.supervised = std::make_unique<umvs::MvsFolderSource>(args.all("supervised-data"), supervised_cfg);
+      std::cerr << "supervised data: " << data.supervised->description() << ", share "
+                << args.real("supervised-share") << ", weight " << tcfg.supervised_weight << "\n";
+    }
+    // --eval-only scores held-out bag keyframes, or the --data folders themselves.
+    std::cerr << "data: " << (eval_only && from_bags ? *data.held_out : *data.train).description()
+              << "\nloss: " << tcfg.loss.to_string() << "\n";
+    return data;
+  };
 
   if (eval_only) {
-    const umvs::TupleSource& eval_source = from_bags ? *data.held_out : *data.train;
-    auto loaded = umvs::load_model(args.str("eval-only"), device);
-    const auto tuples = fixed_tuples(eval_source, args.integer("val-tuples"));
-    const auto ev = umvs::evaluate_model(loaded.model, tuples, tcfg, device);
-    // Label-free judge besides the photometric loss: the share of depth that other views confirm.
-    const auto consistency = umvs::depth_consistency(loaded.model, tuples, tcfg.num_depth, umvs::FusionConfig(), device);
-    std::cout << args.str("eval-only") << ": " << describe(ev) << ", multi-view consistent "
-              << 100.0 * consistency.confirmed_fraction << "%\n";
+    const umvs::TrainingData data = open_data();
+    const umvs::EvalRow row = umvs::evaluate_checkpoint(args.str("eval-only"), from_bags ? *data.held_out : *data.train,
+                                                        args.integer("val-tuples"), tcfg, device);
+    std::cout << row.checkpoint << ": " << umvs::describe(row) << "\n";
     if (!args.str("out").empty()) {
       umvs::make_directories(args.str("out"));
       umvs::write_file_atomically(args.str("out") + "/eval.csv", [&](std::ostream& os) {
-        os << umvs::csv_header(umvs::eval_columns()) << "\n"
-           << args.str("eval-only") << "," << ev.tuples << "," << ev.loss.photometric << "," << ev.loss.ssim << ","
-           << ev.loss.smoothness << "," << ev.loss.total << ",";
-        if (ev.depth.pixels > 0) {
-          os << ev.depth.mean_abs << "," << ev.depth.abs_rel << "," << ev.depth.within_1pct;
-        } else {
-          os << ",,";
-        }
-        os << "," << consistency.confirmed_fraction << "\n";
+        os << umvs::csv_header(umvs::eval_columns()) << "\n" << umvs::format_csv_row(row) << "\n";
       });
     }
     return 0;
   }
 
-  const std::string last_path = out + "/last.pt", best_path = out + "/best.pt", log_path = out + "/train_log.csv";
-  const umvs::TupleSource& source = *data.train;
-  // Self-training: the training tuples labelled by the model (refreshed every round), mixed with
-  // the photometric tuples like --supervised-data.
-  std::unique_ptr<umvs::TupleList> pseudo;
-  std::vector<umvs::TrainingTuple> to_label;
-  if (self_training) {
-    to_label = fixed_tuples(source, args.integer("pseudo-label-tuples"));
-    pseudo = std::make_unique<umvs::TupleList>(to_label, "pseudo-labelled training tuples");
-    data.supervised.reset();
-  }
-  std::vector<umvs::TrainingTuple> val_tuples;
-  if (data.held_out) {
-    val_tuples = fixed_tuples(*data.held_out, args.integer("val-tuples"));
-    std::cerr << "validation: " << data.held_out->description() << ", using " << val_tuples.size() << "\n";
-  }
-
-  if (data_cfg.width == 0 || data_cfg.height == 0) {  // the size comes from the images
-    const auto first = source.tuple(0, nullptr).network_views.at(0).image;
-    umvs::check_training_memory(static_cast<int>(first.size(-1)), static_cast<int>(first.size(-2)), tcfg.num_depth,
-                                data_cfg.views_in, data_cfg.views_loss, args.integer("batch"));
-  }
-
-  // The model: resumed, initialised from a checkpoint, or random.
-  umvs::MvsNet model{nullptr};
-  umvs::CheckpointMeta meta;
-  double best = INFINITY;
-  // best.pt candidates are only compared under one metric (a depth error is no loss value).
-  std::string best_metric;
-  if (resume) {
-    auto loaded = umvs::load_model(last_path, device);
-    model = loaded.model;
-    meta = loaded.meta;
-    if (meta.metrics.count("best_score")) best = meta.metrics.at("best_score");
-    best_metric = score_metric(meta);
-    LogRow planned;
-    planned.has_val = !val_tuples.empty();
-    for (const auto& t : val_tuples) planned.val.depth.pixels += t.depth_gt.defined() ? 1 : 0;
-    if (score_metric(planned) != best_metric) {
-      throw std::invalid_argument("--resume: best.pt of this run was chosen by " + best_metric + ", this call would score by " +
-                                  score_metric(planned) + "; give the validation data of the run");
-    }
-    std::cerr << "resuming " << last_path << " at step " << meta.step << "\n";
-  } else if (args.given("init")) {
-    auto loaded = umvs::load_model(args.str("init"), device);
-    model = loaded.model;
-    std::cerr << "initialised from " << args.str("init") << " (" << loaded.format << ")\n";
-  } else {
-    torch::manual_seed(args.integer("seed"));
-    umvs::MvsNetConfig mcfg;
-    mcfg.num_depth = tcfg.num_depth;
-    mcfg.num_views = data_cfg.views_in;
-    mcfg.depth_sampling = umvs::depth_sampling_from_string(args.str("depth-sampling"));
-    mcfg.input_normalization = umvs::input_normalization_from_string(args.str("input-normalization"));
-    model = umvs::MvsNet(mcfg);
-  }
-  model->set_num_depth(tcfg.num_depth);
-  umvs::Trainer trainer(model, device, tcfg);
-  // Tuples come from --data/--bag, mixed with --supervised-data at --supervised-share.
-  const umvs::TupleSource* supervised_source = self_training ? pseudo.get() : data.supervised.get();
-  const bool mixed = supervised_source != nullptr;
-  umvs::MixedSampler sampler(mixed ? *supervised_source : source, mixed ? &source : nullptr,
-                             args.real("supervised-share"), static_cast<uint64_t>(args.integer("seed")));
-  int64_t step = 0;
-  std::vector<LogRow> history;
-  std::vector<std::string> kept_lines;
-  if (resume) {
-    trainer.load_optimizer_state(meta.optimizer_state);
-    unpack_rng(meta.rng_state, sampler);
-    step = meta.step;
-    history = read_log(log_path, step, &kept_lines);
-  }
-  // Everything is checked: from here on OUT changes.
-  umvs::make_directories(out);
-  if (args.on("overwrite")) umvs::remove_run_files(out);
-  umvs::write_run_config(out + "/" + umvs::kRunConfigFile, run_config);
-  // The log holds exactly the rows up to the starting step (rows after the resumed checkpoint are dropped).
-  umvs::write_file_atomically(log_path, [&](std::ostream& os) {
-    os << umvs::csv_header(umvs::train_log_columns()) << "\n";
-    for (const auto& l : kept_lines) os << l << "\n";
-  });
-  std::ofstream log(log_path, std::ios::app);
-
-  const int64_t total_steps = args.integer("steps");
-  const int save_every = args.integer("save-every");
-  const int batch = args.integer("batch");
-  const double max_seconds = 60.0 * args.real("max-minutes");
-  const auto started = std::chrono::steady_clock::now();
-  double interval_loss = 0;
-  int interval_count = 0;
-
-  auto checkpoint = [&](LogRow& row) {
-    double score = interval_count > 0 ? interval_loss / interval_count : INFINITY;
-    if (!val_tuples.empty()) {
-      row.val = trainer.evaluate(val_tuples);
-      row.has_val = true;
-      score = val_score(row.val);
-      std::cerr << "\nstep " << row.step << " validation: " << describe(row.val) << "\n";
-    }
-    interval_loss = 0;
-    interval_count = 0;
-    const std::string metric = score_metric(row);
-    if (best_metric.empty()) best_metric = metric;
-    const bool comparable = metric == best_metric;
-    if (!comparable) {
-      std::cerr << "\nstep " << row.step << ": scored by " << metric << ", best.pt by " << best_metric
-                << ": best.pt kept\n";
-    }
-    const bool improved = comparable && (std::isfinite(score) ? score < best : !fs::exists(best_path));
-    if (improved && std::isfinite(score)) best = score;
-    umvs::CheckpointMeta m;
-    m.step = row.step;
-    m.optimizer_state = trainer.optimizer_state();
-    m.rng_state = pack_rng(sampler);
-    m.metrics["score"] = score;
-    m.metrics["best_score"] = best;
-    m.metrics["train_total"] = row.loss.total;
-    if (row.has_val) {
-      m.metrics["val_photometric"] = row.val.loss.photometric;
-      m.metrics["val_total"] = row.val.loss.total;
-      if (row.val.depth.pixels > 0) m.metrics["val_abs_err"] = row.val.depth.mean_abs;
-    }
-    umvs::save_checkpoint(last_path, trainer.model(), m);
-    if (improved) umvs::save_checkpoint(best_path, trainer.model(), m);
-  };
-
-  if (total_steps == 0 || step >= total_steps) {
-    LogRow row;
-    row.step = step;
-    checkpoint(row);
-    std::cout << "wrote the model at step " << step << " to " << last_path << " and " << best_path << "\n";
-    return 0;
-  }
-
-  std::cerr << "training " << total_steps - step << " steps (" << step << " done), batch " << batch << ", "
-            << data_cfg.width << "x" << data_cfg.height << ", D=" << tcfg.num_depth << ", device " << device << ", "
-            << torch::get_num_threads() << " threads\n";
-  umvs::Progress progress("train", total_steps - step, std::max<int64_t>(1, (total_steps - step) / 50));
-  const int64_t first = step;
-  int bad_steps = 0;
-  // A self-training round starts at every multiple of --self-training-every: its labels come from
-  // the model at that step (round_start.pt keeps it, so that a resumed run labels exactly alike).
-  const std::string round_path = out + "/round_start.pt";
+  umvs::TrainingRunConfig run;
+  run.out = args.str("out");
+  run.start = args.on("resume") ? umvs::RunStart::kResume
+              : args.on("overwrite") ? umvs::RunStart::kOverwrite
+                                     : umvs::RunStart::kFresh;
+  run.options = run_config_of(args);
+  run.may_change_on_resume = kMayChangeOnResume;
+  run.init = args.str("init");
+  run.new_model.depth_sampling = umvs::depth_sampling_from_string(args.str("depth-sampling"));
+  run.new_model.input_normalization = umvs::input_normalization_from_string(args.str("input-normalization"));
+  run.seed = static_cast<uint64_t>(args.integer("seed"));
+  run.trainer = tcfg;
+  run.data = data_cfg;
+  run.steps = args.integer("steps");
+  run.batch = args.integer("batch");
+  run.save_every = args.integer("save-every");
+  run.max_minutes = args.real("max-minutes");
+  run.augment = augment;
+  run.val_tuples = args.integer("val-tuples");
+  run.supervised_share = args.real("supervised-share");
+  run.self_training_every = self_training_every;
+  run.pseudo_label_tuples = args.integer("pseudo-label-tuples");
   // Fusion's rule, loosened for the training size's few planes (32 planes over 0.5-8 m are ~9 %
   // apart in depth, so 1 % agreement would keep almost nothing).
-  umvs::FusionConfig label_rule;
-  label_rule.min_confidence = args.real("label-min-confidence");
-  label_rule.max_relative_depth = args.real("label-max-relative-depth");
-  label_rule.min_agreeing_views = args.integer("label-min-views");
-  label_rule.validate();
-  auto label_round = [&](umvs::MvsNet& labeller) {
-    umvs::ConsistencyScore score;
-    pseudo->replace(umvs::pseudo_labelled_tuples(labeller, to_label, tcfg.num_depth, label_rule, device,
-                                                 &score));
-    std::cerr << "\nself-training round at step " << step << ": " << 100.0 * score.confirmed_fraction
-              << "% of the reference pixels of " << score.tuples << " tuples confirmed by other views\n";
-  };
-  if (self_training && step % self_training_every != 0) {  // resumed within a round
-    if (!fs::exists(round_path)) throw std::runtime_error("--resume: " + round_path + " is missing");
-    auto round_model = umvs::load_model(round_path, device);
-    if (round_model.meta.step != step / self_training_every * self_training_every) {
-      throw std::runtime_error("--resume: " + round_path + " is from step " + std::to_string(round_model.meta.step) +
-                               ", not from the start of the round of step " + std::to_string(step));
-    }
-    label_round(round_model.model);
+  run.label_rule.min_confidence = args.real("label-min-confidence");
+  run.label_rule.max_relative_depth = args.real("label-max-relative-depth");
+  run.label_rule.min_agreeing_views = args.integer("label-min-views");
+  run.device = device;
+  umvs::TrainingRun training(run, open_data, std::cerr);
+
+  const int64_t to_do = std::max<int64_t>(0, run.steps - training.step());
+  if (to_do > 0) {  // (nothing to do: the model is checkpointed as it is)
+    std::cerr << "training " << to_do << " steps (" << training.step() << " done), batch " << run.batch << ", "
+              << data_cfg.width << "x" << data_cfg.height << ", D=" << tcfg.num_depth << ", device " << device << ", "
+              << torch::get_num_threads() << " threads\n";
   }
-  while (step < total_steps) {
-    if (self_training && step % self_training_every == 0) {
-      label_round(trainer.model());
-      umvs::CheckpointMeta m;
-      m.step = step;
-      umvs::save_checkpoint(round_path, trainer.model(), m);
-    }
-    const auto t0 = std::chrono::steady_clock::now();
-    std::vector<umvs::TrainingTuple> tuples;
-    for (int i = 0; i < batch; ++i) tuples.push_back(sampler.next(augment));
-    LogRow row;
-    row.loss = trainer.step(tuples).mean();
-    row.step = ++step;
-    row.lr = tcfg.lr;
-    row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    if (!std::isfinite(row.loss.total)) {
-      ++bad_steps;
-      std::cerr << "\nstep " << step << ": non-finite loss on " << tuples[0].name << ", update skipped\n";
-    } else {
-      interval_loss += row.loss.total;
-      ++interval_count;
-    }
-    const bool out_of_time =
-        max_seconds > 0 && std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count() >= max_seconds;
-    if (step % save_every == 0 || step == total_steps || out_of_time) {
-      checkpoint(row);
-    }
-    log << csv_line(row) << "\n" << std::flush;
-    history.push_back(row);
-    if (row.has_val || step == total_steps || out_of_time) write_curve(out + "/loss_curve.png", history);
+  std::optional<umvs::Progress> progress;
+  if (to_do > 0) progress.emplace("train", to_do, std::max<int64_t>(1, to_do / 50));
+  const auto result = training.run([&](const umvs::TrainLogRow& row, int64_t done, int64_t) {
     char extra[160];
-    std::snprintf(extra, sizeof(extra), "loss %.4f (photo %.4f ssim %.4f smooth %.4f sup %.3f)", row.loss.total,
-                  row.loss.photometric, row.loss.ssim, row.loss.smoothness, row.loss.supervised);
-    progress.update(step - first, extra);
-    if (out_of_time) {
-      std::cerr << "\n--max-minutes " << args.real("max-minutes") << " reached at step " << step
-                << ": checkpointed; continue with --resume\n";
-      break;
-    }
+    std::snprintf(extra, sizeof(extra), "loss %.4f (photo %.4f ssim %.4f smooth %.4f sup %.3f)", row.total.value_or(NAN),
+                  row.photometric.value_or(NAN), row.ssim.value_or(NAN), row.smoothness.value_or(NAN),
+                  row.supervised.value_or(NAN));
+    progress->update(done, extra);
+  });
+  if (!progress) {
+    std::cout << "wrote the model at step " << result.step << " to " << training.last_path() << " and "
+              << training.best_path() << "\n";
+    return 0;
   }
-  progress.finish();
-  std::cout << "trained to step " << step << "; checkpoints " << last_path << ", " << best_path << " (best score "
-            << best << "); log " << log_path << (bad_steps ? "; " + std::to_string(bad_steps) + " steps skipped" : "")
-            << "\n";
+  progress->finish();
+  if (result.out_of_time) {
+    std::cerr << "--max-minutes " << run.max_minutes << " reached at step " << result.step
+              << ": checkpointed; continue with --resume\n";
+  }
+  std::cout << "trained to step " << result.step << "; checkpoints " << training.last_path() << ", "
+            << training.best_path() << " (best score " << result.best_score << "); log " << training.log_path()
+            << (result.skipped_steps ? "; " + std::to_string(result.skipped_steps) + " steps skipped" : "") << "\n";
   return 0;
 }

@@ -1,0 +1,106 @@
+// One training run in its output folder: the data, the model, the optimiser, the checkpoints
+// (last.pt, best.pt, written atomically), validation on held-out tuples, self-training rounds and
+// the log (train_log.csv, loss_curve.png). `umvs train` only turns its options into a
+// TrainingRunConfig and opens the data; everything a run does with them lives here.
+#pragma once
+
+#include <functional>
+#include <iosfwd>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "unsup_mvs/core/fusion.h"
+#include "unsup_mvs/core/mvsnet.h"
+#include "unsup_mvs/core/training.h"
+#include "unsup_mvs/io/run_folder.h"
+#include "unsup_mvs/io/training_data.h"
+
+namespace umvs {
+
+// The tuples of a run. `train` is required; `held_out` (validation) and `supervised` (rendered
+// folders trained on their ground truth, mixed in at TrainingRunConfig::supervised_share) may be null.
+struct TrainingData {
+  std::unique_ptr<TupleSource> train, held_out, supervised;
+};
+
+struct TrainingRunConfig {
+  std::string out;                       // the run folder
+  RunStart start = RunStart::kFresh;     // new run, --resume or --overwrite
+  RunConfig options;                     // stored as run_config.txt; a resume must match them
+  std::vector<std::string> may_change_on_resume;  // options a resume may change (not compared)
+  std::string init;                      // checkpoint to start from; "" = new model (new_model)
+  MvsNetConfig new_model;                // the network of a new model (num_views, sampling, ...)
+  uint64_t seed = 1;                     // initial weights and data order
+  TrainerConfig trainer;
+  TupleConfig data;                      // the tuples' size and views (memory check)
+  int64_t steps = 10000;                 // total optimisation steps of the run
+  int batch = 1;
+  int save_every = 500;                  // validate and checkpoint every this many steps
+  double max_minutes = 0;                // stop after this wall time, checkpointed (0 = no limit)
+  bool augment = true;
+  int val_tuples = 0;                    // held-out tuples validated on (0 = all)
+  double supervised_share = 0.5;         // share of steps' tuples from the supervised source
+  // Self-training (0 = off): every N steps the training tuples are labelled by the current model
+  // where views agree under label_rule, and trained on at supervised_share.
+  int self_training_every = 0;
+  int pseudo_label_tuples = 0;           // tuples labelled per round (0 = all)
+  FusionConfig label_rule;
+  torch::Device device = torch::kCPU;
+  void validate() const;  // throws std::invalid_argument naming the field
+};
+
+class TrainingRun {
+ public:
+  // Checks the configuration and the run folder (check_run_folder) first, then opens the data
+  // (open_data) and the model: resumed from OUT/last.pt, from config.init, or new. Writes nothing:
+  // a refused run leaves OUT as it was. Messages (resume, validation) go to `messages`.
+  TrainingRun(TrainingRunConfig config, const std::function<TrainingData()>& open_data, std::ostream& messages);
+  ~TrainingRun();
+
+  struct Result {
+    int64_t step = 0;         // the step of last.pt
+    double best_score = 0;    // of best.pt (lower is better; see best_metric)
+    std::string best_metric;  // val_abs_err | val_total | train_total
+    int skipped_steps = 0;    // non-finite losses, updates skipped
+    bool out_of_time = false; // max_minutes ended it before `steps`
+  };
+  // Trains from the current step to config.steps; on_step after every step with the row just
+  // logged, the steps done in this call and the steps this call has to do.
+  Result run(const std::function<void(const TrainLogRow& row, int64_t done, int64_t to_do)>& on_step = nullptr);
+
+  int64_t step() const { return step_; }
+  std::string last_path() const { return config_.out + "/last.pt"; }
+  std::string best_path() const { return config_.out + "/best.pt"; }
+  std::string log_path() const { return config_.out + "/train_log.csv"; }
+
+ private:
+  void checkpoint(TrainLogRow& row);
+  void label_round(MvsNet& labeller);
+  void write_curve() const;
+
+  TrainingRunConfig config_;
+  TrainingData data_;
+  std::ostream& messages_;
+  std::unique_ptr<Trainer> trainer_;
+  std::unique_ptr<MixedSampler> sampler_;
+  std::unique_ptr<TupleList> pseudo_;           // self-training labels
+  std::vector<TrainingTuple> to_label_, val_tuples_;
+  std::vector<TrainLogRow> history_;            // the log up to step_
+  int64_t step_ = 0;
+  double best_ = 0;
+  std::string best_metric_;
+  double interval_loss_ = 0;                    // training loss since the last checkpoint
+  int interval_count_ = 0;
+};
+
+// --eval-only: the held-out loss, GT depth errors (where the tuples have them) and multi-view
+// consistency of a checkpoint on (at most max_tuples, 0 = all) tuples of `source`.
+EvalRow evaluate_checkpoint(const std::string& checkpoint, const TupleSource& source, int max_tuples,
+                            const TrainerConfig& config, const torch::Device& device);
+std::string describe(const EvalRow& row);  // one line for people
+
+// `limit` tuples (0 = all) spread evenly over the source, unaugmented.
+std::vector<TrainingTuple> fixed_tuples(const TupleSource& source, int limit);
+
+}  // namespace umvs

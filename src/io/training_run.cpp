@@ -1,0 +1,378 @@
+#include "unsup_mvs/io/training_run.h"
+
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <ostream>
+#include <sstream>
+
+#include "unsup_mvs/core/memory_bounds.h"
+#include "unsup_mvs/io/atomic_file.h"
+#include "unsup_mvs/io/checkpoint.h"
+#include "unsup_mvs/io/image_io.h"
+#include "unsup_mvs/io/loss_curve.h"
+
+namespace umvs {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+constexpr const char* kRoundStartFile = "round_start.pt";
+
+TrainLogRow log_row(int64_t step, const LossValues& loss, double lr, double seconds) {
+  TrainLogRow row;
+  row.step = step;
+  row.total = loss.total;
+  row.photometric = loss.photometric;
+  row.ssim = loss.ssim;
+  row.smoothness = loss.smoothness;
+  row.valid_fraction = loss.valid_fraction;
+  row.lr = lr;
+  row.seconds = seconds;
+  row.supervised = loss.supervised;
+  return row;
+}
+
+void add_validation(const Evaluation& ev, TrainLogRow* row) {
+  row->val_photometric = ev.loss.photometric;
+  row->val_total = ev.loss.total;
+  if (ev.depth.pixels > 0) {
+    row->val_abs_err = ev.depth.mean_abs;
+    row->val_within_1pct = ev.depth.within_1pct;
+  }
+}
+
+// The metric best.pt is chosen by (lower is better): the held-out ground-truth depth error, the
+// held-out photometric loss, or (without validation data) the training loss.
+std::string score_metric(const CheckpointMeta& meta) {
+  if (meta.metrics.count("val_abs_err")) return "val_abs_err";
+  if (meta.metrics.count("val_total")) return "val_total";
+  return "train_total";
+}
+std::string score_metric(bool validated, bool ground_truth) {
+  if (!validated) return "train_total";
+  return ground_truth ? "val_abs_err" : "val_total";
+}
+
+// A validation row's score (it has val_total).
+double validation_score(const TrainLogRow& row) { return row.val_abs_err ? *row.val_abs_err : *row.val_total; }
+
+std::string describe(const Evaluation& ev) {
+  std::ostringstream s;
+  s.precision(4);
+  s << "photometric " << ev.loss.photometric << ", ssim " << ev.loss.ssim << ", total " << ev.loss.total;
+  if (ev.depth.pixels > 0) {
+    s << ", depth |err| mean " << ev.depth.mean_abs << ", abs rel " << ev.depth.abs_rel << ", within 1% "
+      << 100.0 * ev.depth.within_1pct << "%";
+  }
+  s << " (" << ev.tuples << " tuples)";
+  return s.str();
+}
+
+// The rng_state of a checkpoint: the sampler's text state, a NUL, then LibTorch's generator bytes.
+std::string pack_rng(const MixedSampler& sampler) { return sampler.state() + '\0' + torch_rng_state(); }
+void unpack_rng(const std::string& bytes, MixedSampler& sampler) {
+  const auto nul = bytes.find('\0');
+  if (nul == std::string::npos) throw std::runtime_error("checkpoint has no training RNG state: cannot resume exactly");
+  sampler.set_state(bytes.substr(0, nul));
+  set_torch_rng_state(bytes.substr(nul + 1));
+}
+
+void check_memory(const TrainingRunConfig& c, int width, int height) {
+  check_training_memory(width, height, c.trainer.num_depth, c.data.views_in, c.data.views_loss, c.batch);
+}
+
+}  // namespace
+
+void TrainingRunConfig::validate() const {
+  auto at_least = [](const char* name, int64_t value, int64_t lowest) {
+    if (value < lowest) {
+      throw std::invalid_argument(std::string(name) + " must be >= " + std::to_string(lowest) + ", got " +
+                                  std::to_string(value));
+    }
+  };
+  if (out.empty()) throw std::invalid_argument("the run folder (out) is required");
+  at_least("steps", steps, 0);
+  at_least("batch", batch, 1);
+  at_least("save_every", save_every, 1);
+  at_least("val_tuples", val_tuples, 0);
+  at_least("self_training_every", self_training_every, 0);
+  at_least("pseudo_label_tuples", pseudo_label_tuples, 0);
+  if (!(max_minutes >= 0)) throw std::invalid_argument("max_minutes must be >= 0 (0 = no limit)");
+  if (!(supervised_share >= 0 && supervised_share <= 1)) throw std::invalid_argument("supervised_share must be in [0, 1]");
+  trainer.validate();
+  data.validate();
+  if (trainer.loss.top_k > data.views_loss) {
+    throw std::invalid_argument("top_k " + std::to_string(trainer.loss.top_k) + " exceeds views_loss " +
+                                std::to_string(data.views_loss));
+  }
+  if (self_training_every > 0) label_rule.validate();
+}
+
+TrainingRun::TrainingRun(TrainingRunConfig config, const std::function<TrainingData()>& open_data,
+                         std::ostream& messages)
+    : config_(std::move(config)), messages_(messages) {
+  config_.validate();
+  if (config_.data.width > 0 && config_.data.height > 0) check_memory(config_, config_.data.width, config_.data.height);
+  const bool resume = config_.start == RunStart::kResume;
+  std::string warnings;
+  check_run_folder(config_.out, config_.start, config_.options, config_.may_change_on_resume, &warnings);
+  messages_ << warnings;
+  data_ = open_data();
+  if (!data_.train) throw std::invalid_argument("a training run needs training data");
+
+  const TupleSource& source = *data_.train;
+  // Self-training: the training tuples labelled by the model (refreshed every round), mixed with
+  // the photometric tuples like supervised data.
+  if (config_.self_training_every > 0) {
+    to_label_ = fixed_tuples(source, config_.pseudo_label_tuples);
+    pseudo_ = std::make_unique<TupleList>(to_label_, "pseudo-labelled training tuples");
+    data_.supervised.reset();
+  }
+  if (data_.held_out) {
+    val_tuples_ = fixed_tuples(*data_.held_out, config_.val_tuples);
+    messages_ << "validation: " << data_.held_out->description() << ", using " << val_tuples_.size() << "\n";
+  }
+  if (config_.data.width == 0 || config_.data.height == 0) {  // the size comes from the images
+    const auto first = source.tuple(0, nullptr).network_views.at(0).image;
+    check_memory(config_, static_cast<int>(first.size(-1)), static_cast<int>(first.size(-2)));
+  }
+
+  // The model: resumed, initialised from a checkpoint, or new.
+  MvsNet model{nullptr};
+  CheckpointMeta meta;
+  best_ = INFINITY;
+  if (resume) {
+    auto loaded = load_model(last_path(), config_.device);
+    model = loaded.model;
+    meta = loaded.meta;
+    if (meta.metrics.count("best_score")) best_ = meta.metrics.at("best_score");
+    // best.pt candidates are only compared under one metric (a depth error is no loss value).
+    best_metric_ = score_metric(meta);
+    bool ground_truth = false;
+    for (const auto& t : val_tuples_) ground_truth = ground_truth || t.depth_gt.defined();
+    const std::string planned = score_metric(!val_tuples_.empty(), ground_truth);
+    if (planned != best_metric_) {
+      throw std::invalid_argument("--resume: best.pt of this run was chosen by " + best_metric_ +
+                                  ", this call would score by " + planned + "; give the validation data of the run");
+    }
+    messages_ << "resuming " << last_path() << " at step " << meta.step << "\n";
+  } else if (!config_.init.empty()) {
+    auto loaded = load_model(config_.init, config_.device);
+    model = loaded.model;
+    messages_ << "initialised from " << config_.init << " (" << loaded.format << ")\n";
+  } else {
+    torch::manual_seed(config_.seed);
+    MvsNetConfig mcfg = config_.new_model;
+    mcfg.num_depth = config_.trainer.num_depth;
+    mcfg.num_views = config_.data.views_in;
+    model = MvsNet(mcfg);
+  }
+  model->set_num_depth(config_.trainer.num_depth);
+  trainer_ = std::make_unique<Trainer>(model, config_.device, config_.trainer);
+  const TupleSource* supervised = pseudo_ ? pseudo_.get() : data_.supervised.get();
+  sampler_ = std::make_unique<MixedSampler>(supervised ? *supervised : source, supervised ? &source : nullptr,
+                                            config_.supervised_share, config_.seed);
+  if (resume) {
+    trainer_->load_optimizer_state(meta.optimizer_state);
+    unpack_rng(meta.rng_state, *sampler_);
+    step_ = meta.step;
+    // The log up to the resumed checkpoint (rows written after it are dropped).
+    for (const auto& csv : read_csv_rows(log_path())) {
+      TrainLogRow row = train_log_row(csv);
+      if (row.step > step_) break;
+      history_.push_back(row);
+    }
+  }
+}
+
+TrainingRun::~TrainingRun() = default;
+
+void TrainingRun::checkpoint(TrainLogRow& row) {
+  double score = interval_count_ > 0 ? interval_loss_ / interval_count_ : INFINITY;
+  bool ground_truth = false;
+  if (!val_tuples_.empty()) {
+    const Evaluation ev = trainer_->evaluate(val_tuples_);
+    add_validation(ev, &row);
+    ground_truth = ev.depth.pixels > 0;
+    score = validation_score(row);
+    messages_ << "\nstep " << row.step << " validation: " << describe(ev) << "\n";
+  }
+  interval_loss_ = 0;
+  interval_count_ = 0;
+  const std::string metric = score_metric(!val_tuples_.empty(), ground_truth);
+  if (best_metric_.empty()) best_metric_ = metric;
+  const bool comparable = metric == best_metric_;
+  if (!comparable) {
+    messages_ << "\nstep " << row.step << ": scored by " << metric << ", best.pt by " << best_metric_
+              << ": best.pt kept\n";
+  }
+  const bool improved = comparable && (std::isfinite(score) ? score < best_ : !fs::exists(best_path()));
+  if (improved && std::isfinite(score)) best_ = score;
+  CheckpointMeta m;
+  m.step = row.step;
+  m.optimizer_state = trainer_->optimizer_state();
+  m.rng_state = pack_rng(*sampler_);
+  m.metrics["score"] = score;
+  m.metrics["best_score"] = best_;
+  if (row.total) m.metrics["train_total"] = *row.total;
+  if (row.val_photometric) m.metrics["val_photometric"] = *row.val_photometric;
+  if (row.val_total) m.metrics["val_total"] = *row.val_total;
+  if (row.val_abs_err) m.metrics["val_abs_err"] = *row.val_abs_err;
+  save_checkpoint(last_path(), trainer_->model(), m);
+  if (improved) save_checkpoint(best_path(), trainer_->model(), m);
+}
+
+void TrainingRun::label_round(MvsNet& labeller) {
+  ConsistencyScore score;
+  pseudo_->replace(pseudo_labelled_tuples(labeller, to_label_, config_.trainer.num_depth, config_.label_rule,
+                                          config_.device, &score));
+  messages_ << "\nself-training round at step " << step_ << ": " << 100.0 * score.confirmed_fraction
+            << "% of the reference pixels of " << score.tuples << " tuples confirmed by other views\n";
+}
+
+void TrainingRun::write_curve() const {
+  CurveSeries raw{{}, {}, 190, 190, 235}, smooth{{}, {}, 20, 60, 200}, val{{}, {}, 220, 40, 30};
+  double ema = 0;
+  bool first = true;
+  for (const auto& row : history_) {
+    if (row.total) {
+      raw.x.push_back(row.step);
+      raw.y.push_back(*row.total);
+      ema = first ? *row.total : 0.95 * ema + 0.05 * *row.total;
+      first = false;
+      smooth.x.push_back(row.step);
+      smooth.y.push_back(ema);
+    }
+    if (row.val_total) {
+      val.x.push_back(row.step);
+      val.y.push_back(validation_score(row));
+    }
+  }
+  write_png(config_.out + "/loss_curve.png", render_curves({raw, smooth, val}));
+}
+
+TrainingRun::Result TrainingRun::run(
+    const std::function<void(const TrainLogRow& row, int64_t done, int64_t to_do)>& on_step) {
+  const std::string out = config_.out;
+  // Everything is checked: from here on OUT changes.
+  make_directories(out);
+  if (config_.start == RunStart::kOverwrite) remove_run_files(out);
+  write_run_config(out + "/" + kRunConfigFile, config_.options);
+  // The log holds exactly the rows up to the starting step.
+  write_file_atomically(log_path(), [&](std::ostream& os) {
+    os << csv_header(train_log_columns()) << "\n";
+    for (const auto& row : history_) os << format_csv_row(row) << "\n";
+  });
+  std::ofstream log(log_path(), std::ios::app);
+
+  Result result;
+  if (config_.steps == 0 || step_ >= config_.steps) {
+    TrainLogRow row;
+    row.step = step_;
+    checkpoint(row);
+    result.step = step_;
+    result.best_score = best_;
+    result.best_metric = best_metric_;
+    return result;
+  }
+
+  const int64_t first = step_, to_do = config_.steps - step_;
+  const double max_seconds = 60.0 * config_.max_minutes;
+  const auto started = std::chrono::steady_clock::now();
+  const int every = config_.self_training_every;
+  // A self-training round starts at every multiple of `every`: its labels come from the model at
+  // that step (round_start.pt keeps it, so that a resumed run labels exactly alike).
+  const std::string round_path = out + "/" + kRoundStartFile;
+  if (every > 0 && step_ % every != 0) {  // resumed within a round
+    if (!fs::exists(round_path)) throw std::runtime_error("--resume: " + round_path + " is missing");
+    auto round_model = load_model(round_path, config_.device);
+    if (round_model.meta.step != step_ / every * every) {
+      throw std::runtime_error("--resume: " + round_path + " is from step " + std::to_string(round_model.meta.step) +
+                               ", not from the start of the round of step " + std::to_string(step_));
+    }
+    label_round(round_model.model);
+  }
+  while (step_ < config_.steps) {
+    if (every > 0 && step_ % every == 0) {
+      label_round(trainer_->model());
+      CheckpointMeta m;
+      m.step = step_;
+      save_checkpoint(round_path, trainer_->model(), m);
+    }
+    const auto t0 = std::chrono::steady_clock::now();
+    std::vector<TrainingTuple> tuples;
+    for (int i = 0; i < config_.batch; ++i) tuples.push_back(sampler_->next(config_.augment));
+    const LossValues loss = trainer_->step(tuples).mean();
+    ++step_;
+    TrainLogRow row = log_row(step_, loss, config_.trainer.lr,
+                              std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    if (!std::isfinite(loss.total)) {
+      ++result.skipped_steps;
+      messages_ << "\nstep " << step_ << ": non-finite loss on " << tuples[0].name << ", update skipped\n";
+    } else {
+      interval_loss_ += loss.total;
+      ++interval_count_;
+    }
+    result.out_of_time =
+        max_seconds > 0 && std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count() >= max_seconds;
+    if (step_ % config_.save_every == 0 || step_ == config_.steps || result.out_of_time) checkpoint(row);
+    log << format_csv_row(row) << "\n" << std::flush;
+    history_.push_back(row);
+    if (row.val_total || step_ == config_.steps || result.out_of_time) write_curve();
+    if (on_step) on_step(row, step_ - first, to_do);
+    if (result.out_of_time) break;
+  }
+  result.step = step_;
+  result.best_score = best_;
+  result.best_metric = best_metric_;
+  return result;
+}
+
+std::vector<TrainingTuple> fixed_tuples(const TupleSource& source, int limit) {
+  std::vector<TrainingTuple> out;
+  const size_t n = source.size();
+  const size_t count = limit > 0 ? std::min<size_t>(n, static_cast<size_t>(limit)) : n;
+  for (size_t i = 0; i < count; ++i) out.push_back(source.tuple(i * n / count, nullptr));
+  return out;
+}
+
+EvalRow evaluate_checkpoint(const std::string& checkpoint, const TupleSource& source, int max_tuples,
+                            const TrainerConfig& config, const torch::Device& device) {
+  auto loaded = load_model(checkpoint, device);
+  const auto tuples = fixed_tuples(source, max_tuples);
+  const Evaluation ev = evaluate_model(loaded.model, tuples, config, device);
+  // Label-free judge besides the photometric loss: the share of depth that other views confirm.
+  const ConsistencyScore consistency = depth_consistency(loaded.model, tuples, config.num_depth, FusionConfig(), device);
+  EvalRow row;
+  row.checkpoint = checkpoint;
+  row.tuples = ev.tuples;
+  row.photometric = ev.loss.photometric;
+  row.ssim = ev.loss.ssim;
+  row.smoothness = ev.loss.smoothness;
+  row.total = ev.loss.total;
+  if (ev.depth.pixels > 0) {
+    row.abs_err = ev.depth.mean_abs;
+    row.abs_rel = ev.depth.abs_rel;
+    row.within_1pct = ev.depth.within_1pct;
+  }
+  row.consistent = consistency.confirmed_fraction;
+  return row;
+}
+
+std::string describe(const EvalRow& row) {
+  std::ostringstream s;
+  s.precision(4);
+  s << "photometric " << row.photometric.value_or(NAN) << ", ssim " << row.ssim.value_or(NAN) << ", total "
+    << row.total.value_or(NAN);
+  if (row.abs_err) {
+    s << ", depth |err| mean " << *row.abs_err << ", abs rel " << row.abs_rel.value_or(NAN) << ", within 1% "
+      << 100.0 * row.within_1pct.value_or(NAN) << "%";
+  }
+  s << " (" << row.tuples.value_or(0) << " tuples), multi-view consistent " << 100.0 * row.consistent.value_or(0) << "%";
+  return s.str();
+}
+
+}  // namespace umvs
