@@ -278,13 +278,14 @@ TEST(TrainingRun, LogsEveryStepResumesAndRefusesAnOccupiedFolderBeforeReadingDat
       EXPECT_EQ(to_do, 3);
     });
     EXPECT_EQ(result.step, 3);
-    EXPECT_EQ(result.best_metric, "val_total");  // held-out data without depth_gt/ read
+    EXPECT_EQ(result.best_metric, "val_abs_err");  // the held-out scene has depth_gt/
     EXPECT_FALSE(result.out_of_time);
   }
   ASSERT_EQ(seen.size(), 3u);
   EXPECT_FALSE(seen[0].val_total.has_value());  // validated at steps 2 and 3 (save_every, the end)
   ASSERT_TRUE(seen[1].val_total.has_value());
   ASSERT_TRUE(seen[2].val_total.has_value());
+  EXPECT_TRUE(seen[2].val_abs_err.has_value());
   // The log is the rows the callback saw, through the one table definition.
   const auto logged = read_csv_rows(out + "/train_log.csv");
   ASSERT_EQ(logged.size(), 3u);
