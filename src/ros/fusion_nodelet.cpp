@@ -118,8 +118,10 @@ class FusionNodelet : public nodelet::Nodelet {
       if (!added.empty() && increment_pub_.getNumSubscribers() > 0) {
         increment_pub_.publish(to_cloud_msg(added, world_frame_, msg->header.stamp));
       }
+      // The map is republished after every fused estimate, with its stamp: subscribers can tell
+      // which estimates it includes even when the last one added no point.
       last_stamp_ = msg->header.stamp;
-      dirty_ = dirty_ || !added.empty();
+      dirty_ = true;
       NODELET_INFO_THROTTLE(2.0, "fusion: depth estimate %u added %zu points in %.2f s; %zu points from %ld estimates",
                             msg->keyframe_id, added.size(), (ros::WallTime::now() - t0).toSec(), fusion_->cloud().size(),
                             estimates_);

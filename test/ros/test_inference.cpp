@@ -84,7 +84,9 @@ class InferenceTest : public ::testing::Test {
 std::string InferenceTest::dir_;
 
 TEST_F(InferenceTest, SubscribesLazily) {
-  ros::WallDuration(1.0).sleep();
+  // Once its services are up the nodelet is initialised: it must still not listen to keyframes.
+  ASSERT_TRUE(reload_.waitForExistence(ros::Duration(30.0)));
+  ros::spinOnce();
   EXPECT_EQ(keyframes_pub_.getNumSubscribers(), 0u) << "keyframes subscribed without anyone listening to the outputs";
   subscribe();
   EXPECT_EQ(keyframes_pub_.getNumSubscribers(), 1u);
@@ -171,11 +173,10 @@ TEST_F(InferenceTest, BadSetsAreLoggedAndSkipped) {
   keyframes_pub_.publish(bad_range);
   EXPECT_TRUE(log.wait_for("impossible depth range", 10.0)) << log.all();
 
-  ros::WallDuration(0.5).sleep();
-  ros::spinOnce();
-  EXPECT_TRUE(estimates_.empty());
+  // One worker handles the sets in order: an estimate of a bad set would arrive before this one.
   keyframes_pub_.publish(make_set(23));
   ASSERT_TRUE(wait_for([&] { return !estimates_.empty(); }, 60.0)) << log.all();
+  ASSERT_EQ(estimates_.size(), 1u) << "a bad set produced an estimate: id " << estimates_.front()->keyframe_id;
   EXPECT_EQ(estimates_.front()->keyframe_id, 23u);
 }
 
@@ -186,9 +187,8 @@ TEST_F(InferenceTest, LatestSetWinsWhenBusy) {
   // Six sets at once: the network takes far longer than publishing, so the stale ones are dropped
   // and the newest one is processed.
   for (uint32_t id = 100; id < 106; ++id) keyframes_pub_.publish(make_set(id));
+  // The newest set is the last one handled (one worker, in order): all estimates are in by then.
   ASSERT_TRUE(wait_for([&] { return !estimates_.empty() && estimates_.back()->keyframe_id == 105; }, 60.0));
-  ros::WallDuration(1.0).sleep();
-  ros::spinOnce();
   EXPECT_LE(estimates_.size(), 2u);
   EXPECT_EQ(estimates_.back()->keyframe_id, 105u);
 }

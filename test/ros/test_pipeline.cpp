@@ -65,6 +65,9 @@ TEST(Pipeline, SyntheticBagToFusedCloud) {
   // Watch the pipeline.
   std::vector<unsup_mvs::KeyframeSetConstPtr> sets;
   std::vector<std::pair<unsup_mvs::DepthEstimateConstPtr, double>> estimates;  // + latency (s)
+  ros::Time cloud_stamp;
+  auto cloud_sub = nh.subscribe<sensor_msgs::PointCloud2>(
+      "/unsup_mvs/cloud", 1, [&](const sensor_msgs::PointCloud2ConstPtr& m) { cloud_stamp = m->header.stamp; });
   auto set_sub = nh.subscribe<unsup_mvs::KeyframeSet>("/unsup_mvs/keyframes", 20,
                                                       [&](const unsup_mvs::KeyframeSetConstPtr& m) { sets.push_back(m); });
   auto est_sub = nh.subscribe<unsup_mvs::DepthEstimate>("/unsup_mvs/depth_estimate", 20, [&](const unsup_mvs::DepthEstimateConstPtr& m) {
@@ -131,8 +134,9 @@ TEST(Pipeline, SyntheticBagToFusedCloud) {
   ASSERT_TRUE(wait_for([&] { return sets.size() >= 3; }, 10.0)) << sets.size() << " keyframe sets";
   // Wait until the newest keyframe set has its depth estimate.
   ASSERT_TRUE(wait_for([&] { return !estimates.empty() && estimates.back().first->keyframe_id == sets.back()->reference_id; }, 60.0));
-  ros::WallDuration(2.0).sleep();  // the fusion node finishes the last estimate
-  ros::spinOnce();
+  // The fusion node has fused the last estimate when its map carries that estimate's stamp.
+  const ros::Time last_estimate = estimates.back().first->header.stamp;
+  ASSERT_TRUE(wait_for([&] { return cloud_stamp == last_estimate; }, 30.0)) << "the map never included the last estimate";
 
   for (const auto& [e, latency] : estimates) {
     EXPECT_EQ(e->header.frame_id, "camera_optical_frame");
