@@ -9,6 +9,7 @@ PACKAGES=(
   # toolchain and libraries of the core
   build-essential cmake pkg-config git
   libtorch-dev libopenblas0-pthread libeigen3-dev libnanoflann-dev
+  libgloo-dev  # headers of the c10d Gloo backend in libtorch (data-parallel umvs train)
   libgtest-dev libgmock-dev
   libstb-dev  # image codecs for the portable build without OpenCV
   # io

@@ -134,6 +134,7 @@ void TrainerConfig::validate() const {
   if (!(supervised_weight >= 0) || !std::isfinite(supervised_weight)) {
     throw std::invalid_argument("supervised weight must be finite and >= 0");
   }
+  if (micro_batch < 0) throw std::invalid_argument("micro batch must be >= 0 (0 = the whole batch), got " + std::to_string(micro_batch));
 }
 
 void LossValues::add(const LossTerms& t) {
@@ -165,11 +166,54 @@ Trainer::Trainer(MvsNet model, torch::Device device, TrainerConfig config)
 
 LossValues Trainer::step(const std::vector<TrainingTuple>& tuples) {
   model_->train();
-  const auto b = make_training_batch(tuples, config_.num_depth, model_->config().depth_sampling, device_);
   // BatchNorm updates its running statistics in the forward pass: keep them, so that a batch that
   // turns out broken leaves no trace (NaN statistics would ruin every later evaluation).
   std::vector<torch::Tensor> buffers_before;
   for (const auto& buffer : model_->buffers()) buffers_before.push_back(buffer.clone());
+  optimizer_->zero_grad();
+  // The gradient of the batch's mean loss, one micro-batch at a time (BatchNorm statistics per
+  // micro-batch, as on the ranks of a distributed job).
+  const size_t n = tuples.size();
+  const size_t micro = config_.micro_batch > 0 ? static_cast<size_t>(config_.micro_batch) : n;
+  LossValues values;
+  values.count = 1;
+  bool finite = true;
+  for (size_t start = 0; start < n && finite; start += micro) {
+    const std::vector<TrainingTuple> part(tuples.begin() + start, tuples.begin() + std::min(n, start + micro));
+    const double weight = static_cast<double>(part.size()) / n;
+    const LossValues v = forward_backward(part, weight);
+    values.total += weight * v.total;
+    values.photometric += weight * v.photometric;
+    values.ssim += weight * v.ssim;
+    values.smoothness += weight * v.smoothness;
+    values.valid_fraction += weight * v.valid_fraction;
+    values.supervised += weight * v.supervised;
+    finite = std::isfinite(v.total);
+  }
+  if (!finite) values.total = NAN;
+  bool all_finite = finite;
+  if (gradient_sync_) {
+    // Every rank takes part in the all-reduce, also with a broken batch (zero gradients), so that
+    // none waits for it; a broken batch anywhere skips the update everywhere.
+    auto parameters = model_->parameters();
+    for (auto& p : parameters) {
+      if (!p.grad().defined() || !finite) p.mutable_grad() = torch::zeros_like(p);
+    }
+    all_finite = gradient_sync_(parameters, finite);
+  }
+  if (!all_finite) {  // no update from a broken batch; the caller reports it
+    torch::NoGradGuard no_grad;
+    auto buffers = model_->buffers();
+    for (size_t i = 0; i < buffers.size(); ++i) buffers[i].copy_(buffers_before[i]);
+    values.updated = false;
+    return values;
+  }
+  optimizer_->step();
+  return values;
+}
+
+LossValues Trainer::forward_backward(const std::vector<TrainingTuple>& tuples, double weight) {
+  const auto b = make_training_batch(tuples, config_.num_depth, model_->config().depth_sampling, device_);
   const auto out = model_->forward(b.images, b.proj, b.depth_values);
   // Which tuples learn from ground truth and which from photometric consistency.
   std::vector<int64_t> supervised_rows, photometric_rows;
@@ -198,15 +242,7 @@ LossValues Trainer::step(const std::vector<TrainingTuple>& tuples) {
   }
   values.total = total.item<double>();
   values.count = 1;
-  optimizer_->zero_grad();
-  if (!std::isfinite(values.total)) {  // no update from a broken batch; the caller reports it
-    torch::NoGradGuard no_grad;
-    auto buffers = model_->buffers();
-    for (size_t i = 0; i < buffers.size(); ++i) buffers[i].copy_(buffers_before[i]);
-    return values;
-  }
-  total.backward();
-  optimizer_->step();
+  if (std::isfinite(values.total)) (total * weight).backward();
   return values;
 }
 

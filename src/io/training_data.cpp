@@ -184,14 +184,27 @@ TupleSampler::TupleSampler(const TupleSource& source, uint64_t seed) : source_(s
   if (source.size() == 0) throw std::invalid_argument("empty training source");
 }
 
-TrainingTuple TupleSampler::next(bool augment) {
+size_t TupleSampler::next_index() {
   if (position_ >= order_.size()) {
     order_.resize(source_.size());
     std::iota(order_.begin(), order_.end(), size_t{0});
     for (size_t i = order_.size(); i > 1; --i) std::swap(order_[i - 1], order_[rng_() % i]);  // Fisher-Yates
     position_ = 0;
   }
-  return source_.tuple(order_[position_++], augment ? &rng_ : nullptr);
+  return order_[position_++];
+}
+
+// Each tuple's augmentation draws from a generator seeded by one draw of rng_: a skipped tuple
+// moves the sampler exactly as a read one, whatever the augmentation consumes.
+TrainingTuple TupleSampler::next(bool augment) {
+  const size_t index = next_index();
+  std::mt19937_64 augmentation(rng_());
+  return source_.tuple(index, augment ? &augmentation : nullptr);
+}
+
+void TupleSampler::skip() {
+  next_index();
+  rng_();
 }
 
 std::string TupleSampler::state() const {
@@ -237,6 +250,12 @@ TrainingTuple MixedSampler::next(bool augment) {
 
 // Sections separated by a line "--": the choice RNG, the first sampler, the second (if any). The
 // single-source state is the first sampler's alone, as before mixing existed.
+void MixedSampler::skip() {
+  if (!second_) return first_.skip();
+  if (uniform(choice_rng_, 0.0, 1.0) < first_share_) first_.skip();
+  else second_->skip();
+}
+
 std::string MixedSampler::state() const {
   if (!second_) return first_.state();
   std::ostringstream s;

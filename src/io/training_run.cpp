@@ -109,6 +109,7 @@ void TrainingRunConfig::validate() const {
                                 std::to_string(data.views_loss));
   }
   if (self_training_every > 0) label_rule.validate();
+  distributed.validate();
 }
 
 TrainingRun::TrainingRun(TrainingRunConfig config, const std::function<TrainingData()>& open_data,
@@ -117,9 +118,26 @@ TrainingRun::TrainingRun(TrainingRunConfig config, const std::function<TrainingD
   config_.validate();
   if (config_.data.width > 0 && config_.data.height > 0) check_memory(config_, config_.data.width, config_.data.height);
   const bool resume = config_.start == RunStart::kResume;
-  std::string warnings;
-  check_run_folder(config_.out, config_.start, config_.options, config_.may_change_on_resume, &warnings);
-  messages_ << warnings;
+  if (config_.distributed.enabled()) {
+    const auto& d = config_.distributed;
+    messages_ << "rank " << d.rank << " of " << d.world_size << ": joining the job at " << d.master_addr << ":"
+              << d.master_port << "\n";
+    group_ = std::make_unique<ProcessGroup>(d);
+  }
+  // Rank 0 checks the run folder and tells the others whether the run may start.
+  std::string refusal;
+  if (writes_files()) {
+    try {
+      std::string warnings;
+      check_run_folder(config_.out, config_.start, config_.options, config_.may_change_on_resume, &warnings);
+      messages_ << warnings;
+    } catch (const std::invalid_argument& e) {
+      if (!group_) throw;
+      refusal = e.what();
+    }
+  }
+  if (group_) refusal = group_->share_from_rank0(refusal);
+  if (!refusal.empty()) throw std::invalid_argument(writes_files() ? refusal : "rank 0 refused the run: " + refusal);
   data_ = open_data();
   if (!data_.train) throw std::invalid_argument("a training run needs training data");
 
@@ -172,6 +190,23 @@ TrainingRun::TrainingRun(TrainingRunConfig config, const std::function<TrainingD
   }
   model->set_num_depth(config_.trainer.num_depth);
   trainer_ = std::make_unique<Trainer>(model, config_.device, config_.trainer);
+  if (group_) {
+    // Every rank starts from rank 0's weights and averages the gradients of each step.
+    std::vector<torch::Tensor> state = trainer_->model()->parameters();
+    for (const auto& b : trainer_->model()->buffers()) state.push_back(b);
+    group_->broadcast_from_rank0(state);
+    int64_t values = 0;
+    for (const auto& p : trainer_->model()->parameters()) values += p.numel();
+    messages_ << "rank " << group_->rank() << ": each step all-reduces " << values << " gradient values ("
+              << values * 4 / 1e6 << " MB)\n";
+    trainer_->set_gradient_sync([this](const std::vector<torch::Tensor>& parameters, bool finite) {
+      const bool all_finite = group_->sum({finite ? 0.0 : 1.0})[0] == 0.0;
+      std::vector<torch::Tensor> gradients;
+      for (const auto& p : parameters) gradients.push_back(p.grad());
+      group_->average(gradients);
+      return all_finite;
+    });
+  }
   const TupleSource* supervised = pseudo_ ? pseudo_.get() : data_.supervised.get();
   sampler_ = std::make_unique<MixedSampler>(supervised ? *supervised : source, supervised ? &source : nullptr,
                                             config_.supervised_share, config_.seed);
@@ -180,7 +215,7 @@ TrainingRun::TrainingRun(TrainingRunConfig config, const std::function<TrainingD
     unpack_rng(meta.rng_state, *sampler_);
     step_ = meta.step;
     // The log up to the resumed checkpoint (rows written after it are dropped).
-    for (const auto& csv : read_csv_rows(log_path())) {
+    for (const auto& csv : writes_files() ? read_csv_rows(log_path()) : std::vector<CsvRow>{}) {
       TrainLogRow row = train_log_row(csv);
       if (row.step > step_) break;
       history_.push_back(row);
@@ -193,8 +228,15 @@ TrainingRun::~TrainingRun() = default;
 void TrainingRun::checkpoint(TrainLogRow& row) {
   double score = interval_count_ > 0 ? interval_loss_ / interval_count_ : INFINITY;
   bool ground_truth = false;
+  if (group_) {  // one model on every rank: the BatchNorm running averages of all ranks
+    std::vector<torch::Tensor> buffers;
+    for (const auto& b : trainer_->model()->buffers()) {
+      if (b.is_floating_point()) buffers.push_back(b);
+    }
+    group_->average(buffers);
+  }
   if (!val_tuples_.empty()) {
-    const Evaluation ev = trainer_->evaluate(val_tuples_);
+    const Evaluation ev = validate();
     add_validation(ev, &row);
     ground_truth = ev.depth.pixels > 0;
     score = validation_score(row);
@@ -221,8 +263,52 @@ void TrainingRun::checkpoint(TrainLogRow& row) {
   if (row.val_photometric) m.metrics["val_photometric"] = *row.val_photometric;
   if (row.val_total) m.metrics["val_total"] = *row.val_total;
   if (row.val_abs_err) m.metrics["val_abs_err"] = *row.val_abs_err;
+  if (!writes_files()) return;
   save_checkpoint(last_path(), trainer_->model(), m);
   if (improved) save_checkpoint(best_path(), trainer_->model(), m);
+}
+
+Evaluation TrainingRun::validate() {
+  if (!group_) return trainer_->evaluate(val_tuples_);
+  std::vector<TrainingTuple> share;
+  for (size_t i = static_cast<size_t>(group_->rank()); i < val_tuples_.size(); i += group_->size()) {
+    share.push_back(val_tuples_[i]);
+  }
+  Evaluation mine;
+  if (!share.empty()) mine = trainer_->evaluate(share);
+  // Means weighted by tuples (losses) and by pixels (depth errors), summed over the ranks.
+  const double n = mine.tuples, px = static_cast<double>(mine.depth.pixels);
+  const auto s = group_->sum({n, n * mine.loss.total, n * mine.loss.photometric, n * mine.loss.ssim,
+                              n * mine.loss.smoothness, n * mine.loss.valid_fraction, px, px * mine.depth.mean_abs,
+                              px * mine.depth.abs_rel, px * mine.depth.within_1pct});
+  Evaluation all;
+  all.tuples = static_cast<int>(s[0]);
+  if (s[0] > 0) {
+    all.loss.total = s[1] / s[0];
+    all.loss.photometric = s[2] / s[0];
+    all.loss.ssim = s[3] / s[0];
+    all.loss.smoothness = s[4] / s[0];
+    all.loss.valid_fraction = s[5] / s[0];
+    all.loss.count = 1;
+  }
+  all.depth.pixels = static_cast<int64_t>(s[6]);
+  if (s[6] > 0) {
+    all.depth.mean_abs = s[7] / s[6];
+    all.depth.abs_rel = s[8] / s[6];
+    all.depth.within_1pct = s[9] / s[6];
+  }
+  return all;
+}
+
+std::vector<TrainingTuple> TrainingRun::next_tuples() {
+  std::vector<TrainingTuple> tuples;
+  const int ranks = group_ ? group_->size() : 1, rank = group_ ? group_->rank() : 0;
+  // The step's world_size * batch tuples in one process's order; this rank's are the rank-th batch.
+  for (int i = 0; i < ranks * config_.batch; ++i) {
+    if (i / config_.batch == rank) tuples.push_back(sampler_->next(config_.augment));
+    else sampler_->skip();
+  }
+  return tuples;
 }
 
 void TrainingRun::label_round(MvsNet& labeller) {
@@ -257,16 +343,19 @@ void TrainingRun::write_curve() const {
 TrainingRun::Result TrainingRun::run(
     const std::function<void(const TrainLogRow& row, int64_t done, int64_t to_do)>& on_step) {
   const std::string out = config_.out;
-  // Everything is checked: from here on OUT changes.
-  make_directories(out);
-  if (config_.start == RunStart::kOverwrite) remove_run_files(out);
-  write_run_config(out + "/" + kRunConfigFile, config_.options);
-  // The log holds exactly the rows up to the starting step.
-  write_file_atomically(log_path(), [&](std::ostream& os) {
-    os << csv_header(train_log_columns()) << "\n";
-    for (const auto& row : history_) os << format_csv_row(row) << "\n";
-  });
-  std::ofstream log(log_path(), std::ios::app);
+  std::ofstream log;
+  if (writes_files()) {
+    // Everything is checked: from here on OUT changes.
+    make_directories(out);
+    if (config_.start == RunStart::kOverwrite) remove_run_files(out);
+    write_run_config(out + "/" + kRunConfigFile, config_.options);
+    // The log holds exactly the rows up to the starting step.
+    write_file_atomically(log_path(), [&](std::ostream& os) {
+      os << csv_header(train_log_columns()) << "\n";
+      for (const auto& row : history_) os << format_csv_row(row) << "\n";
+    });
+    log.open(log_path(), std::ios::app);
+  }
 
   Result result;
   if (config_.steps == 0 || step_ >= config_.steps) {
@@ -297,31 +386,45 @@ TrainingRun::Result TrainingRun::run(
   }
   while (step_ < config_.steps) {
     if (every > 0 && step_ % every == 0) {
-      label_round(trainer_->model());
+      label_round(trainer_->model());  // (every rank labels all tuples alike: same model, same labels)
       CheckpointMeta m;
       m.step = step_;
-      save_checkpoint(round_path, trainer_->model(), m);
+      if (writes_files()) save_checkpoint(round_path, trainer_->model(), m);
     }
     const auto t0 = std::chrono::steady_clock::now();
-    std::vector<TrainingTuple> tuples;
-    for (int i = 0; i < config_.batch; ++i) tuples.push_back(sampler_->next(config_.augment));
-    const LossValues loss = trainer_->step(tuples).mean();
+    const std::vector<TrainingTuple> tuples = next_tuples();
+    LossValues loss = trainer_->step(tuples).mean();
     ++step_;
+    bool out_of_time =
+        max_seconds > 0 && std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count() >= max_seconds;
+    if (group_) {  // the job's mean loss, and one decision to stop (rank clocks differ)
+      const auto s = group_->sum({loss.total, loss.photometric, loss.ssim, loss.smoothness, loss.valid_fraction,
+                                  loss.supervised, out_of_time ? 1.0 : 0.0});
+      const double ranks = group_->size();
+      loss.total = loss.updated ? s[0] / ranks : NAN;
+      loss.photometric = s[1] / ranks;
+      loss.ssim = s[2] / ranks;
+      loss.smoothness = s[3] / ranks;
+      loss.valid_fraction = s[4] / ranks;
+      loss.supervised = s[5] / ranks;
+      out_of_time = s[6] > 0;
+    }
+    result.out_of_time = out_of_time;
     TrainLogRow row = log_row(step_, loss, config_.trainer.lr,
                               std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
-    if (!std::isfinite(loss.total)) {
+    if (!loss.updated || !std::isfinite(loss.total)) {
       ++result.skipped_steps;
-      messages_ << "\nstep " << step_ << ": non-finite loss on " << tuples[0].name << ", update skipped\n";
+      messages_ << "\nstep " << step_ << ": non-finite loss"
+                << (tuples.empty() ? std::string() : " (this rank's first tuple: " + tuples[0].name + ")")
+                << ", update skipped\n";
     } else {
       interval_loss_ += loss.total;
       ++interval_count_;
     }
-    result.out_of_time =
-        max_seconds > 0 && std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count() >= max_seconds;
     if (step_ % config_.save_every == 0 || step_ == config_.steps || result.out_of_time) checkpoint(row);
-    log << format_csv_row(row) << "\n" << std::flush;
+    if (writes_files()) log << format_csv_row(row) << "\n" << std::flush;
     history_.push_back(row);
-    if (row.val_total || step_ == config_.steps || result.out_of_time) write_curve();
+    if (writes_files() && (row.val_total || step_ == config_.steps || result.out_of_time)) write_curve();
     if (on_step) on_step(row, step_ - first, to_do);
     if (result.out_of_time) break;
   }

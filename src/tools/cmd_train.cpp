@@ -8,9 +8,11 @@
 #include <optional>
 
 #include "unsup_mvs/core/device.h"
+#include "unsup_mvs/core/distributed.h"
 #include "unsup_mvs/core/keyframes.h"
 #include "unsup_mvs/core/training.h"
 #include "unsup_mvs/io/atomic_file.h"
+#include "unsup_mvs/io/local_ranks.h"
 #include "unsup_mvs/io/run_folder.h"
 #include "unsup_mvs/io/training_data.h"
 #include "unsup_mvs/io/training_run.h"
@@ -75,7 +77,7 @@ umvs::TrainingData open_bags(const umvs::Args& args, const umvs::TupleConfig& co
 // Options that a --resume may change: they do not change what the run computes. All others
 // (data, sizes, loss, optimiser, seed, validation, ...) are the run's configuration.
 const std::vector<std::string> kMayChangeOnResume = {"steps", "max-minutes", "out", "resume", "overwrite", "eval-only", "device",
-                                                     "threads"};
+                                                     "threads", "nproc", "master", "dist-timeout"};
 
 // Every option as given or defaulted; file and folder paths made absolute, so that a resume from
 // another working directory compares equal.
@@ -118,6 +120,59 @@ void check_training_options(const umvs::Args& args) {
   if (args.on("resume") && args.on("overwrite")) {
     throw std::invalid_argument("--resume continues the run in --out, --overwrite replaces it: give one of them");
   }
+}
+
+// --world-size/--rank/--master over the torchrun variables over the defaults.
+umvs::DistributedConfig distributed_config_of(const umvs::Args& args) {
+  umvs::DistributedConfig d = umvs::distributed_config_from_environment();
+  if (!args.str("world-size").empty()) d.world_size = args.integer("world-size");
+  if (!args.str("rank").empty()) d.rank = args.integer("rank");
+  if (!args.str("master").empty()) {
+    const std::string master = args.str("master");
+    const auto colon = master.rfind(':');
+    if (colon == std::string::npos || colon == 0) throw std::invalid_argument("--master must be HOST:PORT, got '" + master + "'");
+    d.master_addr = master.substr(0, colon);
+    try {
+      d.master_port = std::stoi(master.substr(colon + 1));
+    } catch (const std::exception&) {
+      throw std::invalid_argument("--master must be HOST:PORT, got '" + master + "'");
+    }
+  }
+  d.timeout_seconds = args.real("dist-timeout");
+  try {
+    d.validate();
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(std::string("distributed training: ") + e.what());
+  }
+  if (d.enabled() && !umvs::distributed_available()) {
+    throw std::invalid_argument("distributed training: this umvs was built without c10d/Gloo (Debian: libgloo-dev)");
+  }
+  return d;
+}
+
+// --nproc K: this command again as K ranks on this machine; fails as a whole when one rank fails.
+int launch_local_ranks(int argc, char** argv, int ranks) {
+  std::error_code ec;
+  const std::string self = fs::read_symlink("/proc/self/exe", ec).string();
+  if (ec) throw std::runtime_error("--nproc: cannot find this program (/proc/self/exe): " + ec.message());
+  std::vector<std::string> child = {self, "train"};
+  for (int i = 0; i < argc; ++i) {
+    const std::string arg = argv[i];
+    if (arg == "--nproc") {
+      ++i;  // and its value
+      continue;
+    }
+    if (arg.rfind("--nproc=", 0) == 0) continue;
+    child.push_back(arg);
+  }
+  std::cerr << "starting " << ranks << " ranks on this machine (rank 0's output follows)\n";
+  const umvs::LocalRanksResult result = umvs::run_local_ranks(child, ranks, std::cerr);
+  if (result.failed_rank >= 0) {  // the failing rank's exit status (2: bad usage), 1 when it was killed
+    std::cerr << "umvs train: error: " << result.message << "\n";
+    return result.exit_status > 0 ? result.exit_status : 1;
+  }
+  std::cout << "all " << ranks << " ranks finished\n";
+  return 0;
 }
 
 }  // namespace
@@ -198,6 +253,9 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
       .option("depth-sampling", "depth", "depth | inverse_depth (new models only)")
       .option("steps", "10000", "total optimisation steps (0: write the initial model and exit)")
       .option("batch", "1", "tuples per step")
+      .option("micro-batch", "0",
+              "tuples per forward pass, the step's gradient accumulated over them (0 = the whole batch); "
+              "BatchNorm statistics are per micro-batch")
       .option("lr", "1e-3", "Adam learning rate")
       .option("beta1", "0.95", "Adam beta1")
       .option("val", "", "validation folder(s), comma-separated")
@@ -208,10 +266,20 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
       .option("jitter", "0.1", "photometric jitter strength")
       .option("seed", "1", "seed of the initial weights and of the data order")
       .option("device", "cpu", "cpu | cuda | cuda:N")
-      .option("threads", "0", "CPU threads (0 = all cores)");
+      .option("threads", "0", "CPU threads (0 = all cores)")
+      .option("nproc", "1", "data-parallel: start this many local ranks of this command (docs/training.md)")
+      .option("world-size", "", "data-parallel: ranks in the job (default: $WORLD_SIZE, else 1)")
+      .option("rank", "", "data-parallel: this process's rank (default: $RANK, else 0)")
+      .option("master", "", "data-parallel: HOST:PORT of rank 0 (default: $MASTER_ADDR:$MASTER_PORT, else 127.0.0.1:29500)")
+      .option("dist-timeout", "120", "data-parallel: seconds to wait for the other ranks (join, each exchange)");
   if (!args.parse(argc, argv)) return 0;
   // Every option is checked before anything is read or written: a refused call changes nothing.
   check_training_options(args);
+  const umvs::DistributedConfig distributed = distributed_config_of(args);
+  if (args.integer("nproc") > 1 && !args.given("eval-only")) {  // (an evaluation runs in one process)
+    if (distributed.enabled()) throw std::invalid_argument("--nproc starts its own ranks: no --world-size, --rank or $WORLD_SIZE");
+    return launch_local_ranks(argc, argv, args.integer("nproc"));
+  }
 
   umvs::configure_threads(args.integer("threads"));
   const auto device = umvs::parse_device(args.str("device"));
@@ -234,6 +302,7 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
   tcfg.num_depth = args.integer("num-depth");
   tcfg.lr = args.real("lr");
   tcfg.beta1 = args.real("beta1");
+  tcfg.micro_batch = args.integer("micro-batch");
   tcfg.validate();
 
   umvs::TupleConfig data_cfg;
@@ -330,6 +399,9 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
   run.label_rule.max_relative_depth = args.real("label-max-relative-depth");
   run.label_rule.min_agreeing_views = args.integer("label-min-views");
   run.device = device;
+  run.distributed = distributed;
+  run.options["world-size"] = std::to_string(distributed.world_size);  // the job's size, however it was given
+  run.options.erase("rank");
   umvs::TrainingRun training(run, open_data, std::cerr);
 
   const int64_t to_do = std::max<int64_t>(0, run.steps - training.step());

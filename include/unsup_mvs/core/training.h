@@ -77,6 +77,9 @@ struct TrainerConfig {
   // Weight of supervised_depth_loss (tuples marked supervised: rendered scenes) against the
   // photometric total (the other tuples: real images, bags) when both train in one optimisation.
   double supervised_weight = 1.0;
+  // Tuples per forward pass (0 = the whole batch at once): a step's gradient is accumulated over
+  // micro-batches, each with its own BatchNorm statistics, as on the ranks of a distributed job.
+  int micro_batch = 0;
   void validate() const;
 };
 
@@ -85,6 +88,7 @@ struct LossValues {
   double total = 0, photometric = 0, ssim = 0, smoothness = 0, valid_fraction = 0;
   double supervised = 0;  // supervised_depth_loss of the tuples trained on ground truth
   int count = 0;
+  bool updated = true;    // a step: false when no update was applied (a non-finite loss here or, distributed, on another rank)
   void add(const LossTerms& t);
   LossValues mean() const;
 };
@@ -105,6 +109,13 @@ class Trainer {
   // model is put back in train mode afterwards.
   Evaluation evaluate(const std::vector<TrainingTuple>& tuples);
 
+  // Distributed training: called after every backward pass with the parameters (their grad() set,
+  // zeros where a parameter had none) and whether this rank's loss was finite; averages the
+  // gradients over the ranks and returns whether every rank's loss was finite (else no rank
+  // updates). Unset: one process.
+  using GradientSync = std::function<bool(const std::vector<torch::Tensor>& parameters, bool finite)>;
+  void set_gradient_sync(GradientSync sync) { gradient_sync_ = std::move(sync); }
+
   // Adam state as bytes (torch::serialize::OutputArchive), for CheckpointMeta::optimizer_state.
   std::string optimizer_state() const;
   void load_optimizer_state(const std::string& bytes);
@@ -116,7 +127,11 @@ class Trainer {
   MvsNet model_;
   torch::Device device_;
   TrainerConfig config_;
+  // Forward pass and backward of weight * the tuples' loss (gradients accumulate); the loss values.
+  LossValues forward_backward(const std::vector<TrainingTuple>& tuples, double weight);
+
   std::unique_ptr<torch::optim::Adam> optimizer_;
+  GradientSync gradient_sync_;
 };
 
 // The loss of `model` on `tuples` (eval mode, no gradients): the held-out photometric loss a

@@ -109,10 +109,13 @@ class TupleSampler {
  public:
   TupleSampler(const TupleSource& source, uint64_t seed);
   TrainingTuple next(bool augment = true);
+  // Moves on as next() would, without reading the tuple (distributed ranks skip the others' share).
+  void skip();
   std::string state() const;                 // text
   void set_state(const std::string& state);  // throws std::runtime_error when malformed
 
  private:
+  size_t next_index();
   const TupleSource& source_;
   std::mt19937_64 rng_;
   std::vector<size_t> order_;
@@ -124,6 +127,7 @@ class MixedSampler {
   // second may be null: then every tuple comes from first.
   MixedSampler(const TupleSource& first, const TupleSource* second, double first_share, uint64_t seed);
   TrainingTuple next(bool augment = true);
+  void skip();  // as next(), without reading the tuple
   std::string state() const;
   void set_state(const std::string& state);  // throws std::runtime_error when malformed
 

@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "unsup_mvs/core/distributed.h"
 #include "unsup_mvs/core/fusion.h"
 #include "unsup_mvs/core/mvsnet.h"
 #include "unsup_mvs/core/training.h"
@@ -47,6 +48,13 @@ struct TrainingRunConfig {
   int pseudo_label_tuples = 0;           // tuples labelled per round (0 = all)
   FusionConfig label_rule;
   torch::Device device = torch::kCPU;
+  // Data-parallel (world_size > 1): this process is one rank. Each step has world_size * batch
+  // tuples, in the order one process would draw them; rank r trains on the r-th `batch` of them,
+  // the gradients are averaged and every rank applies the same update. BatchNorm statistics are
+  // per rank (as TrainerConfig::micro_batch = batch in one process); their running averages are
+  // averaged over the ranks at each checkpoint. Validation tuples are shared out and the results
+  // summed. Only rank 0 writes the run folder; a resume reads OUT/last.pt on every rank.
+  DistributedConfig distributed;
   void validate() const;  // throws std::invalid_argument naming the field
 };
 
@@ -70,18 +78,24 @@ class TrainingRun {
   Result run(const std::function<void(const TrainLogRow& row, int64_t done, int64_t to_do)>& on_step = nullptr);
 
   int64_t step() const { return step_; }
+  MvsNet& model() { return trainer_->model(); }
+  // Whether this process writes the run folder (rank 0, or the only process).
+  bool writes_files() const { return config_.distributed.rank == 0; }
   std::string last_path() const { return config_.out + "/last.pt"; }
   std::string best_path() const { return config_.out + "/best.pt"; }
   std::string log_path() const { return config_.out + "/train_log.csv"; }
 
  private:
   void checkpoint(TrainLogRow& row);
+  Evaluation validate();                        // on val_tuples_, shared out over the ranks
+  std::vector<TrainingTuple> next_tuples();     // this rank's share of the next step
   void label_round(MvsNet& labeller);
   void write_curve() const;
 
   TrainingRunConfig config_;
   TrainingData data_;
   std::ostream& messages_;
+  std::unique_ptr<ProcessGroup> group_;         // distributed jobs only
   std::unique_ptr<Trainer> trainer_;
   std::unique_ptr<MixedSampler> sampler_;
   std::unique_ptr<TupleList> pseudo_;           // self-training labels

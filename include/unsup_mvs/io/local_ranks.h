@@ -1,0 +1,27 @@
+// `umvs train --nproc K`: one distributed job of K ranks on this machine. The launcher starts K
+// copies of a command with the torchrun variables (WORLD_SIZE, RANK, MASTER_ADDR=127.0.0.1,
+// MASTER_PORT = a free port), relays rank 0's output, and fails as a whole: when one rank fails,
+// the others are stopped and the failing rank's last lines are reported. No rank outlives the
+// launcher (ChildProcess kills children whose parent died).
+#pragma once
+
+#include <iosfwd>
+#include <string>
+#include <vector>
+
+namespace umvs {
+
+struct LocalRanksResult {
+  int exit_status = 0;     // 0 when every rank succeeded; else the first failing rank's status
+  int failed_rank = -1;    // -1 when none failed
+  std::string message;     // what went wrong, with the failing rank's last output lines
+};
+
+// argv[0] must be an absolute path. Rank 0's output goes to `out` as it comes; the other ranks'
+// output is kept (last lines) for error reports. Blocks until all ranks ended.
+LocalRanksResult run_local_ranks(const std::vector<std::string>& argv, int ranks, std::ostream& out);
+
+// A TCP port on 127.0.0.1 that was free a moment ago (bound to port 0 and released).
+int free_local_port();
+
+}  // namespace umvs
