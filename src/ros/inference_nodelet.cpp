@@ -15,6 +15,7 @@
 #include <condition_variable>
 #include <future>
 #include <mutex>
+#include <optional>
 #include <thread>
 
 #include "unsup_mvs/DepthEstimate.h"
@@ -22,6 +23,7 @@
 #include "unsup_mvs/ReloadModel.h"
 #include "unsup_mvs/core/depth_estimator.h"
 #include "unsup_mvs/core/device.h"
+#include "unsup_mvs/core/latest_slot.h"
 #include "unsup_mvs/io/ros/ros_conversions.h"
 #include "unsup_mvs/io/checkpoint.h"
 #include "unsup_mvs/io/file_safety.h"
@@ -54,11 +56,7 @@ class InferenceNodelet : public nodelet::Nodelet {
  public:
   ~InferenceNodelet() override {
     reload_spinner_.reset();  // no reload callback runs past this point
-    {
-      std::lock_guard<std::mutex> lock(queue_mutex_);
-      stop_ = true;
-    }
-    queue_cv_.notify_all();
+    pending_.close();
     if (worker_.joinable()) worker_.join();
   }
 
@@ -127,25 +125,14 @@ class InferenceNodelet : public nodelet::Nodelet {
     }
   }
 
-  void onKeyframes(const unsup_mvs::KeyframeSetConstPtr& msg) {
-    {
-      std::lock_guard<std::mutex> lock(queue_mutex_);
-      if (pending_) ++dropped_;  // the older waiting set is stale now
-      pending_ = msg;
-    }
-    queue_cv_.notify_one();
-  }
+  // An older set still waiting is stale now: replaced and counted as dropped.
+  void onKeyframes(const unsup_mvs::KeyframeSetConstPtr& msg) { pending_.put(msg); }
 
   void work() {
     while (true) {
-      unsup_mvs::KeyframeSetConstPtr set;
-      {
-        std::unique_lock<std::mutex> lock(queue_mutex_);
-        queue_cv_.wait(lock, [this] { return stop_ || pending_; });
-        if (stop_) return;
-        set = pending_;
-        pending_.reset();
-      }
+      const std::optional<unsup_mvs::KeyframeSetConstPtr> next = pending_.take();
+      if (!next) return;  // closed: the nodelet is going away
+      const unsup_mvs::KeyframeSetConstPtr& set = *next;
       try {
         process(*set);
       } catch (const std::exception& e) {
@@ -211,7 +198,7 @@ class InferenceNodelet : public nodelet::Nodelet {
     NODELET_INFO_THROTTLE(2.0, "inference: keyframe %u: %dx%d depth map in %.2f s (network %.2f s), %.2f s after the "
                           "image; %ld done, %ld stale sets dropped, %ld failed",
                           set.reference_id, map.camera.width, map.camera.height, total, map.seconds, latency, processed_,
-                          dropped_.load(), failed_.load());
+                          static_cast<long>(pending_.dropped()), failed_.load());
     publishDiagnostics(total, map.seconds, latency, served);
   }
 
@@ -230,7 +217,7 @@ class InferenceNodelet : public nodelet::Nodelet {
       status.values.push_back(p);
     };
     kv("processed", std::to_string(processed_));
-    kv("dropped_stale", std::to_string(dropped_.load()));
+    kv("dropped_stale", std::to_string(pending_.dropped()));
     kv("failed", std::to_string(failed_.load()));
     kv("last_total_s", std::to_string(total));
     kv("last_network_s", std::to_string(network));
@@ -364,12 +351,9 @@ class InferenceNodelet : public nodelet::Nodelet {
   std::unique_ptr<ros::AsyncSpinner> reload_spinner_;
   std::shared_ptr<std::atomic<int>> loads_running_ = std::make_shared<std::atomic<int>>(0);
 
-  std::mutex queue_mutex_;
-  std::condition_variable queue_cv_;
-  unsup_mvs::KeyframeSetConstPtr pending_;
-  bool stop_ = false;
+  umvs::LatestSlot<unsup_mvs::KeyframeSetConstPtr> pending_;  // one waiting set; counts the stale ones dropped
   std::thread worker_;
-  std::atomic<long> dropped_{0}, failed_{0};
+  std::atomic<long> failed_{0};
   long processed_ = 0;
   double seconds_sum_ = 0.0;
 

@@ -22,6 +22,7 @@
 
 #include "unsup_mvs/DepthEstimate.h"
 #include "unsup_mvs/KeyframeSet.h"
+#include "unsup_mvs/core/depth_range.h"
 #include "unsup_mvs/core/keyframes.h"
 #include "unsup_mvs/io/ros/ros_conversions.h"
 #include "unsup_mvs/ros/nodelets.h"
@@ -61,6 +62,7 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
       rectified_ = stream.rectified;
       depth_min_ = stream.depth_min;
       depth_max_ = stream.depth_max;
+      depth_range_ = std::make_unique<umvs::DepthRangeTracker>(depth_min_, depth_max_);
       if (queue_size < 1) throw std::invalid_argument("queue_size must be >= 1");
     } catch (const std::exception& e) {
       NODELET_FATAL("keyframe_selector: invalid parameters: %s", e.what());
@@ -165,11 +167,8 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
     if (evicted >= 0) frames_by_id_.erase(evicted);
     publishPoses(image->header.stamp);
 
-    double near = depth_min_, far = depth_max_;
-    if (have_estimate_range_) {
-      near = estimate_near_;
-      far = estimate_far_;
-    }
+    const umvs::DepthRange range = depth_range_->range();
+    const double near = range.near, far = range.far;
     const auto sources = buffer_->select_sources(ref.id, 0.5 * (near + far));
     if (static_cast<int>(sources.size()) < buffer_->config().num_sources) {
       NODELET_DEBUG("keyframe_selector: keyframe %ld has %zu usable neighbours, waiting for more", static_cast<long>(ref.id),
@@ -205,15 +204,13 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
       const auto depth = umvs::image_msg_to_float(msg->depth);
       const auto conf = umvs::image_msg_to_float(msg->confidence);
       if (!depth.sizes().equals(conf.sizes())) throw std::invalid_argument("depth and confidence differ in size");
-      const auto d = depth.masked_select(conf > 0.5f).contiguous();
-      std::vector<float> values(d.data_ptr<float>(), d.data_ptr<float>() + d.numel());
+      const auto d = depth.contiguous(), c = conf.contiguous();
+      std::vector<float> values = umvs::confident_depths(d.data_ptr<float>(), c.data_ptr<float>(),
+                                                         static_cast<size_t>(d.numel()));
       double near = 0, far = 0;
-      if (!umvs::depth_range_from_samples(values, &near, &far)) return;
+      if (!umvs::depth_range_from_samples(std::move(values), &near, &far)) return;
       std::lock_guard<std::mutex> lock(mutex_);
-      // Never leave the configured bounds: a bad estimate must not shrink the search for good.
-      estimate_near_ = std::max(depth_min_, near);
-      estimate_far_ = std::min(depth_max_, far);
-      have_estimate_range_ = estimate_far_ > estimate_near_ * 1.05;
+      depth_range_->update(near, far);  // clamped to the configured bounds
     } catch (const std::exception& e) {
       NODELET_WARN_THROTTLE(10.0, "keyframe_selector: ignoring depth estimate for the depth range: %s", e.what());
     }
@@ -237,8 +234,7 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
   std::mutex mutex_;
   std::unique_ptr<umvs::KeyframeBuffer> buffer_;
   std::map<int64_t, StoredFrame> frames_by_id_;
-  bool have_estimate_range_ = false;
-  double estimate_near_ = 0, estimate_far_ = 0;
+  std::unique_ptr<umvs::DepthRangeTracker> depth_range_;  // configured bounds, then from the estimates
   long frames_ = 0, sets_ = 0;
 
   std::unique_ptr<tf2_ros::Buffer> tf_buffer_;
