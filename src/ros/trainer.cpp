@@ -2,12 +2,19 @@
 
 #include "unsup_mvs/ReloadModel.h"
 #include "unsup_mvs/TrainingProgress.h"
+#include "unsup_mvs/ros/params.h"
 
 namespace umvs_ros {
 
-Trainer::Trainer(ros::NodeHandle nh, ros::NodeHandle pnh)
-    : nh_(nh), pnh_(pnh), config_(trainer_node_config_from_ros(pnh)), job_(config_.job) {
-  for (const auto& arg : config_.job.keyframe_args_overridden()) {
+Trainer::Trainer(ros::NodeHandle nh, ros::NodeHandle pnh) : Trainer(nh, pnh, trainer_node_config_from_ros(pnh)) {}
+
+Trainer::Trainer(ros::NodeHandle nh, ros::NodeHandle pnh, const TrainerNodeConfig& config)
+    : nh_(nh),
+      pnh_(pnh),
+      served_checkpoint_(config.served_checkpoint),
+      reload_service_(config.reload_service),
+      job_(config.job) {
+  for (const auto& arg : job_.config().keyframe_args_overridden()) {
     ROS_WARN("trainer: ~train_args sets %s, which overrides ~keyframes/ (the keyframe_selector's settings): "
              "live and offline keyframes may then differ",
              arg.c_str());
@@ -15,16 +22,16 @@ Trainer::Trainer(ros::NodeHandle nh, ros::NodeHandle pnh)
   for (const auto& error : job_.setup_errors()) ROS_ERROR("trainer: %s", error.c_str());
   if (const int stale = job_.removed_temp_files()) {
     ROS_WARN("trainer: removed %d temporary file(s) that interrupted writes left in %s", stale,
-             config_.job.output_dir.c_str());
+             job_.config().output_dir.c_str());
   }
   progress_pub_ = pnh_.advertise<unsup_mvs::TrainingProgress>("progress", 10, true);
   fine_tune_srv_ = pnh_.advertiseService("fine_tune", &Trainer::on_fine_tune, this);
   cancel_srv_ = pnh_.advertiseService("cancel", &Trainer::on_cancel, this);
   status_srv_ = pnh_.advertiseService("status", &Trainer::on_status, this);
-  timer_ = nh_.createWallTimer(ros::WallDuration(config_.poll_period), &Trainer::on_timer, this);
-  ROS_INFO("trainer: ready (umvs %s, models into %s, serving %s)", config_.job.umvs_path.c_str(),
-           config_.job.output_dir.c_str(),
-           config_.served_checkpoint.empty() ? "<unknown>" : config_.served_checkpoint.c_str());
+  timer_ = nh_.createWallTimer(ros::WallDuration(config.poll_period), &Trainer::on_timer, this);
+  ROS_INFO("trainer: ready (umvs %s, models into %s, serving %s)", job_.config().umvs_path.c_str(),
+           job_.config().output_dir.c_str(),
+           served_checkpoint_.empty() ? "<unknown>" : served_checkpoint_.c_str());
 }
 
 bool Trainer::on_fine_tune(unsup_mvs::FineTune::Request& req, unsup_mvs::FineTune::Response& res) {
@@ -33,7 +40,7 @@ bool Trainer::on_fine_tune(unsup_mvs::FineTune::Request& req, unsup_mvs::FineTun
   request.init_checkpoint = req.init_checkpoint;
   request.steps = req.steps;
   request.output = req.output;
-  const umvs::FineTuneAnswer answer = job_.start(request, config_.served_checkpoint);
+  const umvs::FineTuneAnswer answer = job_.start(request, served_checkpoint_);
   res.accepted = answer.ok;
   res.job_id = answer.job_id;
   res.message = answer.message;
@@ -56,7 +63,7 @@ bool Trainer::on_cancel(std_srvs::Trigger::Request&, std_srvs::Trigger::Response
 
 bool Trainer::on_status(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
   res.success = job_.busy();
-  res.message = job_.describe() + "; serving " + config_.served_checkpoint;
+  res.message = job_.describe() + "; serving " + served_checkpoint_;
   return true;
 }
 
@@ -74,13 +81,13 @@ void Trainer::on_timer(const ros::WallTimerEvent&) {
 const umvs::FineTuneProgress& Trainer::reload() {
   unsup_mvs::ReloadModel srv;
   srv.request.checkpoint = job_.reload_checkpoint();
-  const std::string& service = config_.reload_service;
+  const std::string& service = reload_service_;
   if (!ros::service::waitForService(service, ros::Duration(5.0)) || !ros::service::call(service, srv)) {
     return job_.reload_unreachable(service);
   }
   if (srv.response.success) {
-    config_.served_checkpoint = job_.reload_checkpoint();
-    pnh_.setParam("served_checkpoint", config_.served_checkpoint);
+    served_checkpoint_ = job_.reload_checkpoint();
+    pnh_.setParam("served_checkpoint", served_checkpoint_);
   }
   return job_.reload_result(srv.response.success, srv.response.message);
 }

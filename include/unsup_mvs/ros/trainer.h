@@ -23,9 +23,10 @@
 
 #include "unsup_mvs/FineTune.h"
 #include "unsup_mvs/io/fine_tune_job.h"
-#include "unsup_mvs/ros/params.h"
 
 namespace umvs_ros {
+
+struct TrainerNodeConfig;  // ros/params.h (not included here: it brings in torch)
 
 class Trainer {
  public:
@@ -33,6 +34,7 @@ class Trainer {
   Trainer(ros::NodeHandle nh, ros::NodeHandle pnh);
 
  private:
+  Trainer(ros::NodeHandle nh, ros::NodeHandle pnh, const TrainerNodeConfig& config);
   bool on_fine_tune(unsup_mvs::FineTune::Request& req, unsup_mvs::FineTune::Response& res);
   bool on_cancel(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
   bool on_status(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
@@ -41,7 +43,8 @@ class Trainer {
   void publish(const umvs::FineTuneProgress& progress);
 
   ros::NodeHandle nh_, pnh_;
-  TrainerNodeConfig config_;  // config_.served_checkpoint follows successful reloads
+  std::string served_checkpoint_;  // ~served_checkpoint, then each model reloaded
+  std::string reload_service_;
   umvs::FineTuneJob job_;
   ros::ServiceServer fine_tune_srv_, cancel_srv_, status_srv_;
   ros::Publisher progress_pub_;
