@@ -4,6 +4,7 @@
 #include <ros/ros.h>
 
 #include <cstdlib>
+#include <filesystem>
 #include <stdexcept>
 
 #include "unsup_mvs/core/device.h"
@@ -109,6 +110,58 @@ FusionNodeConfig fusion_node_config_from_ros(const ros::NodeHandle& nh) {
   nh.param("default_save_path", c.default_save_path, c.default_save_path);
   nh.param("max_image_pixels", c.max_image_pixels, c.max_image_pixels);
   c.validate();
+  return c;
+}
+
+umvs::FineTuneConfig fine_tune_config_from_ros(const ros::NodeHandle& nh) {
+  umvs::FineTuneConfig c;
+  // The tool is built next to this node's executable (devel/lib/unsup_mvs/).
+  std::error_code ec;
+  const std::filesystem::path self = std::filesystem::read_symlink("/proc/self/exe", ec);
+  c.umvs_path = ec ? std::string() : (self.parent_path() / "umvs").string();
+  nh.param("umvs_path", c.umvs_path, c.umvs_path);
+  nh.param("output_dir", c.output_dir, c.output_dir);
+  if (c.output_dir.empty()) {
+    const char* home = std::getenv("HOME");
+    c.output_dir = std::string(home ? home : "/tmp") + "/.ros/unsup_mvs_models";
+  }
+  nh.param("image_topic", c.image_topic, c.image_topic);
+  nh.param("camera_info_topic", c.camera_info_topic, c.camera_info_topic);
+  nh.param("world_frame", c.world_frame, c.world_frame);
+  nh.param("steps", c.default_steps, c.default_steps);
+  nh.param("train_args", c.train_args, c.train_args);
+  // The bags are read as the keyframe_selector reads the live stream: the launch files load its
+  // YAML (and ~rectified) into ~keyframes/ too.
+  try {
+    c.keyframes = keyframe_stream_config_from_ros(ros::NodeHandle(nh, "keyframes"));
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(std::string("invalid ~keyframes/ parameters: ") + e.what());
+  }
+  try {
+    c.validate();
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(std::string("invalid parameters: ") + e.what());
+  }
+  return c;
+}
+
+void TrainerNodeConfig::validate() const {
+  job.validate();
+  if (reload_service.empty()) throw std::invalid_argument("reload_service must not be empty");
+  if (!(poll_period > 0)) throw std::invalid_argument("poll_period must be > 0, got " + std::to_string(poll_period));
+}
+
+TrainerNodeConfig trainer_node_config_from_ros(const ros::NodeHandle& nh) {
+  TrainerNodeConfig c;
+  c.job = fine_tune_config_from_ros(nh);
+  nh.param("served_checkpoint", c.served_checkpoint, c.served_checkpoint);
+  nh.param("reload_service", c.reload_service, c.reload_service);
+  nh.param("poll_period", c.poll_period, c.poll_period);
+  try {
+    c.validate();
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(std::string("invalid parameters: ") + e.what());
+  }
   return c;
 }
 

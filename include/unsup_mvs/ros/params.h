@@ -10,6 +10,7 @@
 #include "unsup_mvs/core/depth_estimator.h"
 #include "unsup_mvs/core/fusion.h"
 #include "unsup_mvs/core/keyframes.h"
+#include "unsup_mvs/io/fine_tune_job.h"
 
 namespace umvs_ros {
 
@@ -58,5 +59,21 @@ struct FusionNodeConfig {
   void validate() const;
 };
 FusionNodeConfig fusion_node_config_from_ros(const ros::NodeHandle& nh);
+
+// The trainer node's job settings: ~umvs_path (default: umvs next to this executable),
+// ~output_dir ("" = $HOME/.ros/unsup_mvs_models), ~image_topic, ~camera_info_topic, ~world_frame,
+// ~steps (FineTuneConfig::default_steps), ~train_args and ~keyframes/ (keyframe_stream_config_from_ros).
+// Throws std::invalid_argument naming the parameter.
+umvs::FineTuneConfig fine_tune_config_from_ros(const ros::NodeHandle& nh);
+
+// All of the trainer node's parameters (docs/ros.md).
+struct TrainerNodeConfig {
+  umvs::FineTuneConfig job;
+  std::string served_checkpoint;  // the model inference serves ("" = unknown: requests are refused)
+  std::string reload_service = "/unsup_mvs/inference/reload_model";
+  double poll_period = 0.5;       // s between progress updates
+  void validate() const;          // throws std::invalid_argument naming the parameter
+};
+TrainerNodeConfig trainer_node_config_from_ros(const ros::NodeHandle& nh);
 
 }  // namespace umvs_ros

@@ -19,25 +19,6 @@ void BagDataConfig::validate() const {
   }
 }
 
-std::vector<std::string> keyframe_stream_train_args(const KeyframeStreamConfig& stream) {
-  auto number = [](double v) {
-    std::ostringstream s;
-    s.precision(17);  // round-trips every double
-    s << v;
-    return s.str();
-  };
-  const KeyframeConfig& k = stream.keyframes;
-  return {"--rectified",      stream.rectified ? "1" : "0",
-          "--min-translation", number(k.min_translation),
-          "--min-rotation-deg", number(k.min_rotation_deg),
-          "--min-pose-distance", number(k.min_pose_distance),
-          "--keyframe-buffer", std::to_string(k.buffer_size),
-          "--min-view-score",  number(k.min_score),
-          "--view-score-grid", std::to_string(k.score_grid),
-          "--depth-min",       number(stream.depth_min),
-          "--depth-max",       number(stream.depth_max)};
-}
-
 std::vector<BagKeyframe> read_bag_keyframes(const std::vector<std::string>& bags, const BagDataConfig& config,
                                             std::ostream* log) {
   config.validate();

@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "unsup_mvs/core/keyframes.h"
+#include "unsup_mvs/io/fine_tune_job.h"  // keyframe_stream_train_args (the options that read a bag as BagDataConfig)
 #include "unsup_mvs/io/ros/bag_io.h"
 #include "unsup_mvs/io/training_data.h"
 
@@ -28,10 +29,6 @@ struct BagDataConfig : KeyframeStreamConfig {
   int holdout_every = 5;       // keyframes 4, 9, 14, ... of each bag are held out; 0 = none
   void validate() const;       // throws std::invalid_argument naming the field
 };
-
-// The `umvs train --bag` options that make it read a bag with `stream` (written by the trainer
-// node, parsed by umvs train; a test runs them through `umvs train`).
-std::vector<std::string> keyframe_stream_train_args(const KeyframeStreamConfig& stream);
 
 struct BagKeyframe {
   size_t bag = 0;        // index into the bag list
