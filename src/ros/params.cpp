@@ -121,10 +121,7 @@ umvs::FineTuneConfig fine_tune_config_from_ros(const ros::NodeHandle& nh) {
   c.umvs_path = ec ? std::string() : (self.parent_path() / "umvs").string();
   nh.param("umvs_path", c.umvs_path, c.umvs_path);
   nh.param("output_dir", c.output_dir, c.output_dir);
-  if (c.output_dir.empty()) {
-    const char* home = std::getenv("HOME");
-    c.output_dir = std::string(home ? home : "/tmp") + "/.ros/unsup_mvs_models";
-  }
+  if (c.output_dir.empty()) c.output_dir = ros_home() + "/unsup_mvs_models";  // as fusion's clouds
   nh.param("image_topic", c.image_topic, c.image_topic);
   nh.param("camera_info_topic", c.camera_info_topic, c.camera_info_topic);
   nh.param("world_frame", c.world_frame, c.world_frame);

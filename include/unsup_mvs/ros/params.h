@@ -61,7 +61,7 @@ struct FusionNodeConfig {
 FusionNodeConfig fusion_node_config_from_ros(const ros::NodeHandle& nh);
 
 // The trainer node's job settings: ~umvs_path (default: umvs next to this executable),
-// ~output_dir ("" = $HOME/.ros/unsup_mvs_models), ~image_topic, ~camera_info_topic, ~world_frame,
+// ~output_dir ("" = $ROS_HOME/unsup_mvs_models, ~/.ros without ROS_HOME), ~image_topic, ~camera_info_topic, ~world_frame,
 // ~steps (FineTuneConfig::default_steps), ~train_args and ~keyframes/ (keyframe_stream_config_from_ros).
 // Throws std::invalid_argument naming the parameter.
 umvs::FineTuneConfig fine_tune_config_from_ros(const ros::NodeHandle& nh);
