@@ -152,16 +152,12 @@ TEST(Distributed, TwoRanksOfBatchOneMatchOneProcessOfBatchTwoInMicroBatches) {
   std::ostringstream messages;
   TrainingRun one(c, open_scene(c.data), messages);
   one.run();
-  const auto a = weights(job->rank[0]->model()), b = weights(one.model());
+  // The learnt weights (BatchNorm's running averages differ by design: one process updates them
+  // once per micro-batch, the ranks once per step and then average them).
+  const auto a = job->rank[0]->model()->parameters(), b = one.model()->parameters();
   ASSERT_EQ(a.size(), b.size());
   double worst = 0;
-  for (size_t i = 0; i < a.size(); ++i) {
-    if (!a[i].is_floating_point()) {
-      EXPECT_TRUE(torch::equal(a[i], b[i]));
-      continue;
-    }
-    worst = std::max(worst, (a[i] - b[i]).abs().max().item<double>());
-  }
+  for (size_t i = 0; i < a.size(); ++i) worst = std::max(worst, (a[i] - b[i]).abs().max().item<double>());
   // Only the order of float sums differs (all-reduce vs autograd accumulation); Adam's steps are
   // 1e-3 here, so a wrong tuple, a missing average or a skipped update would differ by ~1e-3.
   EXPECT_LT(worst, 1e-5);
