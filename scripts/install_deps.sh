@@ -25,6 +25,14 @@ PACKAGES=(
   libtf2-dev libtf2-ros-dev libtf2-eigen-dev
   libcv-bridge-dev libimage-transport-dev libmessage-filters-dev
   librosbag-dev librosbag-storage-dev
+  libdynamic-reconfigure-config-init-mutex-dev python3-dynamic-reconfigure  # live tuning
+  # PCL at the edge (clouds published as pcl::PointCloud, .pcd files, outlier removal)
+  libpcl-dev libpcl-conversions-dev libpcl-ros-dev
+  # libraries instead of hand-written parts: command line, JSON
+  libcli11-dev nlohmann-json3-dev
+  # Python message classes, so `rostopic echo` / `rosservice call` work on our topics and services
+  python3-std-msgs python3-sensor-msgs python3-geometry-msgs python3-diagnostic-msgs
+  python3-std-srvs python3-rosgraph-msgs python3-tf2-msgs
   # ROS 1 runtime tools: master, roslaunch, rostest, rosbag play
   ros-core python3-rostest librostest-dev rosbash
   # the `nodelet` executable (manager / load) that launch/pipeline.launch runs
