@@ -7,6 +7,8 @@
 
 #include <chrono>
 #include <cstdlib>
+#include <fstream>
+#include <functional>
 #include <sstream>
 #include <thread>
 
@@ -93,11 +95,12 @@ std::vector<torch::Tensor> weights(MvsNet& model) {
 struct TwoRanks {
   std::unique_ptr<TrainingRun> rank[2];
   TrainingRun::Result result[2];
+  std::string error[2];
 };
-std::unique_ptr<TwoRanks> run_two_ranks(const std::string& out, int steps) {
+using AdjustRun = std::function<void(TrainingRunConfig&)>;
+std::unique_ptr<TwoRanks> start_two_ranks(const std::string& out, int steps, const AdjustRun& adjust = {}) {
   auto job = std::make_unique<TwoRanks>();
   const int port = free_local_port();
-  std::string errors[2];
   std::ostringstream messages[2];
   auto rank_main = [&](int r) {
     try {
@@ -106,17 +109,22 @@ std::unique_ptr<TwoRanks> run_two_ranks(const std::string& out, int steps) {
       c.distributed.rank = r;
       c.distributed.master_port = port;
       c.distributed.timeout_seconds = 60;
+      if (adjust) adjust(c);
       job->rank[r] = std::make_unique<TrainingRun>(c, open_scene(c.data), messages[r]);
       job->result[r] = job->rank[r]->run();
     } catch (const std::exception& e) {
-      errors[r] = e.what();
+      job->error[r] = e.what();
     }
   };
   std::thread other(rank_main, 1);
   rank_main(0);
   other.join();
-  EXPECT_EQ(errors[0], "");
-  EXPECT_EQ(errors[1], "");
+  return job;
+}
+std::unique_ptr<TwoRanks> run_two_ranks(const std::string& out, int steps, const AdjustRun& adjust = {}) {
+  auto job = start_two_ranks(out, steps, adjust);
+  EXPECT_EQ(job->error[0], "");
+  EXPECT_EQ(job->error[1], "");
   return job;
 }
 
@@ -167,6 +175,47 @@ TEST(Distributed, TwoRanksOfBatchOneMatchOneProcessOfBatchTwoInMicroBatches) {
   for (size_t i = 0; i < ra.size(); ++i) {
     EXPECT_NEAR(*train_log_row(ra[i]).total, *train_log_row(rb[i]).total, 1e-5) << "step " << i + 1;
   }
+}
+
+TEST(Distributed, ResumeRestartsEveryRankFromTheSameStepAndContinuesAsIfUninterrupted) {
+  SKIP_WITHOUT_GLOO();
+  const std::string dir = test::temp_dir("distributed_resume");
+  auto straight = run_two_ranks(dir + "/straight", 4);
+  run_two_ranks(dir + "/resumed", 2);
+  auto resumed = run_two_ranks(dir + "/resumed", 4, [](TrainingRunConfig& c) { c.start = RunStart::kResume; });
+  ASSERT_TRUE(straight->rank[0] && resumed->rank[0] && resumed->rank[1]);
+  EXPECT_EQ(resumed->result[0].step, 4);
+  EXPECT_EQ(resumed->result[1].step, 4);
+  // Same shards, same augmentation and Adam's state restored: the same weights as a run that was
+  // never stopped, on both ranks.
+  for (int r = 0; r < 2; ++r) {
+    const auto a = weights(straight->rank[r]->model()), b = weights(resumed->rank[r]->model());
+    ASSERT_EQ(a.size(), b.size());
+    for (size_t i = 0; i < a.size(); ++i) ASSERT_TRUE(torch::equal(a[i], b[i])) << "rank " << r << " tensor " << i;
+  }
+  // The log continues where it stopped: steps 1..4 with the same losses.
+  const auto ra = read_csv_rows(dir + "/straight/train_log.csv"), rb = read_csv_rows(dir + "/resumed/train_log.csv");
+  ASSERT_EQ(ra.size(), 4u);
+  ASSERT_EQ(rb.size(), 4u);
+  for (size_t i = 0; i < ra.size(); ++i) {
+    EXPECT_EQ(train_log_row(rb[i]).step, static_cast<int64_t>(i + 1));
+    EXPECT_EQ(*train_log_row(ra[i]).total, *train_log_row(rb[i]).total) << "step " << i + 1;
+  }
+}
+
+TEST(Distributed, AnyFailureOfRankZerosFolderCheckEndsTheOtherRanksAtOnce) {
+  SKIP_WITHOUT_GLOO();
+  const std::string out = test::temp_dir("distributed_bad_folder") + "/run";
+  run_two_ranks(out, 2);
+  // A damaged run_config.txt: rank 0 fails reading it (a runtime_error, not a refusal).
+  std::ofstream(out + "/" + kRunConfigFile, std::ios::app) << "this line has no equals sign\n";
+  const auto t0 = std::chrono::steady_clock::now();
+  auto job = start_two_ranks(out, 4, [](TrainingRunConfig& c) { c.start = RunStart::kResume; });
+  // Both fail long before the 60 s timeout of the group.
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::seconds(30));
+  EXPECT_THAT(job->error[0], testing::HasSubstr("expected name=value"));
+  EXPECT_THAT(job->error[1], testing::HasSubstr("rank 0 refused the run: "));
+  EXPECT_THAT(job->error[1], testing::HasSubstr("expected name=value"));
 }
 
 TEST(Distributed, AKilledRankEndsTheOtherWithAClearErrorInsteadOfAHang) {

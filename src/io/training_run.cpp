@@ -1,5 +1,7 @@
 #include "unsup_mvs/io/training_run.h"
 
+#include <exception>
+
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -124,20 +126,24 @@ TrainingRun::TrainingRun(TrainingRunConfig config, const std::function<TrainingD
               << d.master_port << "\n";
     group_ = std::make_unique<ProcessGroup>(d);
   }
-  // Rank 0 checks the run folder and tells the others whether the run may start.
+  // Rank 0 checks the run folder and tells the others whether the run may start, whatever the
+  // failure (a refusal or an unreadable file), so that they do not wait for it until --dist-timeout.
   std::string refusal;
+  std::exception_ptr folder_error;
   if (writes_files()) {
     try {
       std::string warnings;
       check_run_folder(config_.out, config_.start, config_.options, config_.may_change_on_resume, &warnings);
       messages_ << warnings;
-    } catch (const std::invalid_argument& e) {
+    } catch (const std::exception& e) {
       if (!group_) throw;
       refusal = e.what();
+      folder_error = std::current_exception();
     }
   }
   if (group_) refusal = group_->share_from_rank0(refusal);
-  if (!refusal.empty()) throw std::invalid_argument(writes_files() ? refusal : "rank 0 refused the run: " + refusal);
+  if (folder_error) std::rethrow_exception(folder_error);
+  if (!refusal.empty()) throw std::invalid_argument("rank 0 refused the run: " + refusal);
   data_ = open_data();
   if (!data_.train) throw std::invalid_argument("a training run needs training data");
 
