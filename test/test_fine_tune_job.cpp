@@ -178,6 +178,12 @@ TEST(FineTuneConfig, ValidateNamesTheBadField) {
   bad.train_args = {"--width", "64", "--out", "/tmp/x"};
   EXPECT_THAT([&] { bad.validate(); }, ThrowsMessage<std::invalid_argument>(HasSubstr("train_args must not set --out")));
   bad = c;
+  bad.local_ranks = 0;
+  EXPECT_THAT([&] { bad.validate(); }, ThrowsMessage<std::invalid_argument>(HasSubstr("local_ranks must be >= 1, got 0")));
+  bad = c;
+  bad.train_args = {"--nproc", "2"};
+  EXPECT_THAT([&] { bad.validate(); }, ThrowsMessage<std::invalid_argument>(HasSubstr("train_args must not set --nproc: set local_ranks instead")));
+  bad = c;
   bad.world_frame = "";
   EXPECT_THAT([&] { bad.validate(); }, ThrowsMessage<std::invalid_argument>(HasSubstr("world_frame must not be empty")));
   bad = c;
@@ -360,6 +366,21 @@ TEST_F(FineTuneJobTest, TheServedModelStaysWhenTheNewOneIsBetterOnOnlyOneScoreOr
     EXPECT_TRUE(fs::exists(models_ + "/" + a.job_id + "/best.pt"));
   }
   EXPECT_EQ(read_text(served_), "served model");
+}
+
+TEST_F(FineTuneJobTest, WithLocalRanksTheTrainingRunsAsThatManyRanksAndTheEvaluationsAsOneProcess) {
+  config_.local_ranks = 2;
+  prepare_evals(0.10, 0.30, 0.12, 0.25);
+  FineTuneJob job(config_);
+  const FineTuneAnswer a = job.start(request(40), served_);
+  ASSERT_TRUE(a.ok) << a.message;
+  ASSERT_TRUE(poll_until_idle_or_ready(job)) << job.describe();
+  const auto calls = lines_of(fake_ + "/calls");
+  ASSERT_EQ(calls.size(), 3u);
+  EXPECT_THAT(calls[0], HasSubstr(" --steps 40 --out " + models_ + "/" + a.job_id + " --nproc 2"));
+  EXPECT_THAT(calls[1], testing::Not(HasSubstr("--nproc")));
+  EXPECT_THAT(calls[2], testing::Not(HasSubstr("--nproc")));
+  EXPECT_EQ(job.phase(), FineTuneJob::Phase::kReadyToReload) << job.describe();
 }
 
 TEST_F(FineTuneJobTest, CancelStopsTheChildAndLeavesTheServedModel) {

@@ -45,10 +45,19 @@ void FineTuneConfig::validate() const {
   if (default_steps < 1) {
     throw std::invalid_argument("default_steps (~steps) must be >= 1, got " + std::to_string(default_steps));
   }
+  if (local_ranks < 1) {
+    throw std::invalid_argument("local_ranks must be >= 1, got " + std::to_string(local_ranks));
+  }
   // The job sets these itself for every training and evaluation run.
   for (const char* reserved : {"--bag", "--data", "--init", "--steps", "--out", "--eval-only"}) {
     if (std::find(train_args.begin(), train_args.end(), reserved) != train_args.end()) {
       throw std::invalid_argument(std::string("train_args must not set ") + reserved + ": every job sets it");
+    }
+  }
+  // A job is one machine's ranks; their number is local_ranks, so that evaluations stay one process.
+  for (const char* reserved : {"--nproc", "--world-size", "--rank", "--master"}) {
+    if (std::find(train_args.begin(), train_args.end(), reserved) != train_args.end()) {
+      throw std::invalid_argument(std::string("train_args must not set ") + reserved + ": set local_ranks instead");
     }
   }
   try {
@@ -174,6 +183,7 @@ FineTuneAnswer FineTuneJob::start(const FineTuneRequest& req, const std::string&
   argv.insert(argv.end(), data.begin(), data.end());
   const int steps = req.steps > 0 ? req.steps : config_.default_steps;
   argv.insert(argv.end(), {"--init", init, "--steps", std::to_string(steps), "--out", job_dir});
+  if (config_.local_ranks > 1) argv.insert(argv.end(), {"--nproc", std::to_string(config_.local_ranks)});
   try {
     fs::create_directories(job_dir);
     child_.start(argv);

@@ -127,6 +127,7 @@ umvs::FineTuneConfig fine_tune_config_from_ros(const ros::NodeHandle& nh) {
   nh.param("world_frame", c.world_frame, c.world_frame);
   nh.param("steps", c.default_steps, c.default_steps);
   nh.param("train_args", c.train_args, c.train_args);
+  nh.param("local_ranks", c.local_ranks, c.local_ranks);
   // The bags are read as the keyframe_selector reads the live stream: the launch files load its
   // YAML (and ~rectified) into ~keyframes/ too.
   try {

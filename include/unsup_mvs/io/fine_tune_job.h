@@ -33,6 +33,7 @@ struct FineTuneConfig {
   std::string world_frame = "world";
   int default_steps = 500;              // steps of a request that gives 0
   std::vector<std::string> train_args;  // extra `umvs train` arguments (size, planes, held-out share)
+  int local_ranks = 1;  // each training job as this many data-parallel ranks on this machine (--nproc)
   KeyframeStreamConfig keyframes;       // how `umvs train` reads the bags (as the keyframe_selector)
 
   // Throws std::invalid_argument naming the bad field.
