@@ -98,8 +98,10 @@ ProcessGroup::~ProcessGroup() = default;
 void ProcessGroup::broadcast_from_rank0(const std::vector<torch::Tensor>& tensors) {
   collective(config_, "broadcast", [&] {
     for (const auto& t : tensors) {
-      std::vector<at::Tensor> one = {t};
+      std::vector<at::Tensor> one = {t.detach().to(torch::kCPU).contiguous()};
       impl_->group->broadcast(one, c10d::BroadcastOptions{0})->wait();
+      torch::NoGradGuard no_grad;
+      t.copy_(one[0]);
     }
   });
 }
@@ -108,7 +110,8 @@ void ProcessGroup::average(const std::vector<torch::Tensor>& tensors) {
   if (tensors.empty()) return;
   std::vector<torch::Tensor> flat_parts;
   for (const auto& t : tensors) flat_parts.push_back(t.detach().reshape({-1}).to(torch::kFloat32));
-  std::vector<at::Tensor> flat = {torch::cat(flat_parts)};
+  // Gloo reduces host memory: a model on a GPU is averaged through one host copy per step.
+  std::vector<at::Tensor> flat = {torch::cat(flat_parts).to(torch::kCPU)};
   collective(config_, "gradient all-reduce", [&] { impl_->group->allreduce(flat)->wait(); });
   flat[0].div_(config_.world_size);
   torch::NoGradGuard no_grad;
