@@ -295,6 +295,45 @@ std::string ply_header(const std::string& format, uint64_t count) {
          "\nproperty float x\nproperty float y\nproperty float z\nend_header\n";
 }
 
+TEST(RenderArguments, ACamIsDrawnAtItsImagesSizeAndAnotherSizeIsRefused) {
+  const std::string data = test::scene("render_cam", 96, 64, 3);
+  const std::string dir = test::temp_dir("render_cam_out");
+  // Points on a plane 2 units in front of view 0, covering its whole image.
+  const std::string cam_file = data + "/cams/00000000_cam.txt";
+  const Camera cam = read_cam_file(cam_file).camera;
+  PointCloud cloud;
+  for (int v = 0; v < 64; v += 2) {
+    for (int u = 0; u < 96; u += 2) cloud.points.push_back(cam.backproject(u, v, 2.0).cast<float>());
+  }
+  write_ply(dir + "/plane.ply", cloud);
+
+  // No size given: the picture has the size of the view's image (96x64), so the plane fills it.
+  auto r = test::run_umvs("render --cloud " + dir + "/plane.ply --cam " + cam_file + " --out " + dir + "/a.png");
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_THAT(r.output, testing::HasSubstr("(96x64)"));
+  const auto picture = read_image_rgb8(dir + "/a.png");
+  ASSERT_EQ(picture.size(0), 64);
+  ASSERT_EQ(picture.size(1), 96);
+  // Every part of the picture is drawn (background is white, points grey), the far corner as much
+  // as the near one; drawn into a 4x larger picture, only the top-left quarter would be.
+  const auto drawn = (picture != 255).any(-1).to(torch::kFloat);
+  EXPECT_GT(drawn.slice(0, 32, 64).slice(1, 48, 96).mean().item<double>(), 0.9);
+  EXPECT_GT(drawn.slice(0, 0, 32).slice(1, 0, 48).mean().item<double>(), 0.9);
+
+  // Another size than the cam file's image: refused with the reason, nothing written.
+  r = test::run_umvs("render --cloud " + dir + "/plane.ply --cam " + cam_file + " --width 384 --height 256 --out " + dir +
+                     "/b.png");
+  EXPECT_NE(r.status, 0);
+  EXPECT_THAT(r.output, testing::HasSubstr("principal point"));
+  EXPECT_THAT(r.output, testing::HasSubstr("384x256"));
+  EXPECT_FALSE(std::filesystem::exists(dir + "/b.png"));
+  // The same size stated explicitly, or drawn larger with --scale, is fine.
+  r = test::run_umvs("render --cloud " + dir + "/plane.ply --cam " + cam_file + " --width 96 --height 64 --scale 4 --out " +
+                     dir + "/c.png");
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_THAT(r.output, testing::HasSubstr("(384x256)"));
+}
+
 TEST(ReaderFaults, EmptyAndNonFiniteCloudsAreRefusedWithTheReason) {
   const std::string dir = test::temp_dir("clouds");
   PointCloud gt;
