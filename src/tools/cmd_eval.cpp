@@ -248,18 +248,19 @@ int eval_cloud(int argc, char** argv) {
 }  // namespace
 
 UMVS_COMMAND(eval, "depth-map (eval depth) and point-cloud (eval cloud) metrics against ground truth") {
-  const std::string usage = "usage: umvs eval depth --est DIR --gt DIR [options]\n       umvs eval cloud --est PLY --gt PLY [options]\n"
-                            "(umvs eval depth --help, umvs eval cloud --help for the options)\n";
+  const std::string help = umvs::subcommands_help(
+      "umvs eval", "Metrics against ground truth: umvs eval depth --est DIR --gt DIR, umvs eval cloud --est PLY --gt PLY.",
+      {{"depth", "depth maps of `umvs infer` against depth_gt/"}, {"cloud", "a fused cloud against a ground-truth cloud"}});
   if (argc < 1) {
-    std::cerr << usage;
+    std::cerr << help;
     return 2;
   }
   const std::string mode = argv[0];
   if (mode == "depth") return eval_depth(argc - 1, argv + 1);
   if (mode == "cloud") return eval_cloud(argc - 1, argv + 1);
   if (mode == "--help" || mode == "-h") {
-    std::cout << usage;
+    std::cout << help;
     return 0;
   }
-  throw std::invalid_argument("unknown evaluation '" + mode + "' (expected depth or cloud)\n" + usage);
+  throw std::invalid_argument("unknown evaluation '" + mode + "' (expected depth or cloud; see umvs eval --help)");
 }

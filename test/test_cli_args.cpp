@@ -1,0 +1,103 @@
+// The umvs command line on CLI11: every --help is CLI11's, written from the options' declarations
+// with their defaults; bad arguments are refused with the option's name and exit status 2 on stderr.
+#include <gtest/gtest.h>
+#include <torch/torch.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <map>
+#include <string>
+
+#include "cli_test_util.h"
+#include "test_util.h"
+
+namespace umvs {
+namespace {
+
+namespace fs = std::filesystem;
+using test::contains;
+using test::Result;
+using test::run_umvs;
+
+// `umvs ARGS` with only its stderr captured (stdout dropped), and the exit status.
+Result run_umvs_stderr(const std::string& args) {
+  Result r;
+  FILE* pipe = ::popen((umvs_binary() + " " + args + " 2>&1 >/dev/null").c_str(), "r");
+  if (!pipe) return r;
+  char buf[4096];
+  for (size_t n; (n = std::fread(buf, 1, sizeof(buf), pipe)) > 0;) r.output.append(buf, n);
+  const int status = ::pclose(pipe);
+  r.status = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return r;
+}
+
+TEST(CliHelp, EverySubcommandPrintsCli11HelpWithItsDefaults) {
+  // Each subcommand with one option as its help must show it: name, value type and default.
+  std::map<std::string, std::string> shown = {
+      {"bench", "--width NUMBER=640"},
+      {"eval depth", "--rel-thresholds TEXT=0.01,0.03"},
+      {"eval cloud", "--thresholds TEXT=0.002,0.005,0.01"},
+      {"fuse", "--window NUMBER=10"},
+      {"import middlebury", "--margin NUMBER=0.1"},
+      {"import rgbd", "--num-depth NUMBER=192"},
+      {"infer", "--device TEXT=cpu"},
+      {"render", "--height NUMBER=480"},
+      {"synth", "--scene TEXT=room"},
+      {"train", "--steps NUMBER=10000"},
+  };
+#ifdef UMVS_HAVE_ROS
+  shown["bag"] = "--rate NUMBER=2";
+#endif
+  for (const auto& [command, option] : shown) {
+    const Result r = run_umvs(command + " --help");
+    EXPECT_EQ(r.status, 0) << command << ": " << r.output;
+    EXPECT_TRUE(contains(r.output, "Usage: umvs " + command + " [OPTIONS]")) << command << ": " << r.output;
+    EXPECT_TRUE(contains(r.output, "Options:\n  -h,--help")) << command << ": " << r.output;
+    EXPECT_TRUE(contains(r.output, option)) << command << ": " << r.output;
+    EXPECT_EQ(run_umvs(command + " -h").output, r.output) << command;
+  }
+  // The required options say so.
+  EXPECT_TRUE(contains(run_umvs("infer --help").output, "--checkpoint TEXT REQUIRED"));
+}
+
+TEST(CliHelp, CommandListsAreCli11Subcommands) {
+  const Result top = run_umvs("--help");
+  EXPECT_EQ(top.status, 0) << top.output;
+  EXPECT_TRUE(contains(top.output, "Usage: umvs [OPTIONS] SUBCOMMAND")) << top.output;
+  for (const std::string command : {"bench", "eval", "fuse", "import", "infer", "render", "synth", "train"}) {
+    EXPECT_TRUE(contains(top.output, "\n  " + command + " ")) << command << " not listed: " << top.output;
+  }
+  EXPECT_EQ(run_umvs("").status, 2);  // no command: the list, as a usage error
+  const Result eval = run_umvs("eval --help");
+  EXPECT_EQ(eval.status, 0);
+  EXPECT_TRUE(contains(eval.output, "Subcommands:") && contains(eval.output, "\n  depth ") && contains(eval.output, "\n  cloud "))
+      << eval.output;
+  const Result import = run_umvs("import --help");
+  EXPECT_EQ(import.status, 0);
+  EXPECT_TRUE(contains(import.output, "\n  middlebury ") && contains(import.output, "\n  rgbd ")) << import.output;
+}
+
+TEST(CliErrors, BadArgumentsAreRefusedOnStderrNamingTheOption) {
+  const std::string out = test::temp_dir("cli_errors") + "/run";
+  struct Case {
+    std::string args, named;
+  };
+  for (const auto& c : {
+           Case{"train --steps abc --out " + out, "--steps"},       // not a number: refused by CLI11
+           Case{"train --steps=abc --out " + out, "--steps"},       // the same in the --opt=value form
+           Case{"train --steps 1.5 --out " + out, "--steps"},       // a number, but not an integer
+           Case{"train --frobnicate 3 --out " + out, "--frobnicate"},  // unknown option
+           Case{"bench --runs", "--runs"},                          // missing value
+           Case{"render --cloud a.ply", "--out"},                   // missing required option
+           Case{"fuse --depth d --out o.ply --min-views many", "--min-views"},  // numeric default (FusionConfig)
+       }) {
+    const Result r = run_umvs_stderr(c.args);
+    EXPECT_EQ(r.status, 2) << c.args << ": " << r.output;
+    EXPECT_TRUE(contains(r.output, c.named)) << c.args << ": " << r.output;
+    EXPECT_TRUE(contains(r.output, "error")) << c.args << ": " << r.output;
+  }
+  EXPECT_FALSE(fs::exists(out)) << "a refused call created its output folder";
+}
+
+}  // namespace
+}  // namespace umvs
