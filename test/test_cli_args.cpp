@@ -1,6 +1,8 @@
-// The umvs command line on CLI11: every --help is CLI11's, written from the options' declarations
-// with their defaults; bad arguments are refused with the option's name and exit status 2 on stderr.
+// The umvs command line on CLI11 and nlohmann-json: every --help is CLI11's, written from the
+// options' declarations with their defaults; bad arguments are refused with the option's name and
+// exit status 2 on stderr; --json output parses.
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 #include <torch/torch.h>
 
 #include <cstdio>
@@ -10,6 +12,7 @@
 
 #include "cli_test_util.h"
 #include "test_util.h"
+#include "unsup_mvs/io/array_io.h"
 
 namespace umvs {
 namespace {
@@ -97,6 +100,46 @@ TEST(CliErrors, BadArgumentsAreRefusedOnStderrNamingTheOption) {
     EXPECT_TRUE(contains(r.output, "error")) << c.args << ": " << r.output;
   }
   EXPECT_FALSE(fs::exists(out)) << "a refused call created its output folder";
+}
+
+TEST(CliJson, BenchPrintsOneJsonObjectThatParses) {
+  const Result r = run_umvs("bench --case fusion --width=32 --height 24 --sources 1 --runs 2 --warmup 0 --threads 1 --json");
+  ASSERT_EQ(r.status, 0) << r.output;
+  const auto j = nlohmann::json::parse(r.output);
+  EXPECT_EQ(j.at("case"), "fusion");
+  EXPECT_EQ(j.at("width"), 32);
+  EXPECT_EQ(j.at("height"), 24);
+  EXPECT_EQ(j.at("sources"), 1);
+  EXPECT_EQ(j.at("runs"), 2);
+  EXPECT_TRUE(j.at("points").is_number_unsigned()) << j;
+  const double median = j.at("median_s_per_view"), lo = j.at("min_s"), hi = j.at("max_s");
+  EXPECT_GT(lo, 0.0);
+  EXPECT_LE(lo, median);
+  EXPECT_LE(median, hi);
+  for (const char* stage : {"ranking", "consistency", "points"}) EXPECT_GE(j.at("stages_median_s_per_view").at(stage), 0.0);
+}
+
+TEST(CliJson, EvalDepthPrintsNullForMetricsWithoutPixels) {
+  const std::string gt = test::scene("cli_json_gt");
+  const std::string est = test::temp_dir("cli_json_est");
+  fs::create_directories(est + "/depth");
+  const auto gt_depth = read_pfm(gt + "/depth_gt/00000000.pfm");
+  write_pfm(est + "/depth/00000000.pfm", torch::zeros_like(gt_depth));  // no estimate anywhere
+  write_pfm(est + "/depth/00000001.pfm", read_pfm(gt + "/depth_gt/00000001.pfm"));  // exact
+  const Result r = run_umvs("eval depth --est " + est + " --gt " + gt + " --json");
+  ASSERT_EQ(r.status, 0) << r.output;
+  const auto j = nlohmann::json::parse(r.output);
+  ASSERT_EQ(j.at("views").size(), 2u);
+  const auto& empty = j["views"][0];
+  EXPECT_EQ(empty.at("view"), 0);
+  EXPECT_EQ(empty.at("evaluated_pixels"), 0);
+  EXPECT_TRUE(empty.at("mae").is_null()) << empty;  // NaN is not JSON
+  EXPECT_TRUE(empty.at("rmse").is_null()) << empty;
+  const auto& exact = j["views"][1];
+  EXPECT_EQ(exact.at("evaluated_pixels"), exact.at("gt_pixels"));
+  EXPECT_EQ(exact.at("mae"), 0.0);
+  EXPECT_EQ(j.at("rel_thresholds"), nlohmann::json({0.01, 0.03}));
+  EXPECT_EQ(j.at("overall").at("evaluated_pixels"), exact.at("gt_pixels"));
 }
 
 }  // namespace

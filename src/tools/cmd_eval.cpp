@@ -7,6 +7,8 @@
 #include <iostream>
 #include <sstream>
 
+#include <nlohmann/json.hpp>
+
 #include "unsup_mvs/core/device.h"
 #include "unsup_mvs/core/metrics.h"
 #include "unsup_mvs/io/array_io.h"
@@ -34,17 +36,12 @@ std::vector<double> parse_reals(const umvs::Args& args, const std::string& name)
   return out;
 }
 
-// JSON number (NaN and infinity are not JSON: null).
-std::string jnum(double v) {
-  if (!std::isfinite(v)) return "null";
-  char buf[32];
-  std::snprintf(buf, sizeof(buf), "%.9g", v);
-  return buf;
-}
-std::string jlist(const std::vector<double>& v) {
-  std::string s = "[";
-  for (size_t i = 0; i < v.size(); ++i) s += (i ? ", " : "") + jnum(v[i]);
-  return s + "]";
+// JSON number: NaN and infinity are not JSON and print as null.
+nlohmann::ordered_json jnum(double v) { return std::isfinite(v) ? nlohmann::ordered_json(v) : nlohmann::ordered_json(nullptr); }
+nlohmann::ordered_json jlist(const std::vector<double>& v) {
+  nlohmann::ordered_json list = nlohmann::ordered_json::array();
+  for (double x : v) list.push_back(jnum(x));
+  return list;
 }
 std::string pct(double share) {
   char buf[16];
@@ -78,13 +75,10 @@ std::string find_depth_dir(const std::string& root, const std::string& sub) {
   return root;
 }
 
-std::string depth_json(const umvs::DepthMetrics& m) {
-  std::ostringstream os;
-  os << "\"gt_pixels\": " << m.gt_pixels << ", \"evaluated_pixels\": " << m.evaluated_pixels
-     << ", \"completeness\": " << jnum(m.completeness()) << ", \"mae\": " << jnum(m.mae)
-     << ", \"abs_rel\": " << jnum(m.abs_rel) << ", \"rmse\": " << jnum(m.rmse)
-     << ", \"within_rel\": " << jlist(m.within_rel) << ", \"within_abs\": " << jlist(m.within_abs);
-  return os.str();
+nlohmann::ordered_json depth_json(const umvs::DepthMetrics& m) {
+  return {{"gt_pixels", m.gt_pixels}, {"evaluated_pixels", m.evaluated_pixels}, {"completeness", jnum(m.completeness())},
+          {"mae", jnum(m.mae)}, {"abs_rel", jnum(m.abs_rel)}, {"rmse", jnum(m.rmse)},
+          {"within_rel", jlist(m.within_rel)}, {"within_abs", jlist(m.within_abs)}};
 }
 
 int eval_depth(int argc, char** argv) {
@@ -167,12 +161,15 @@ int eval_depth(int argc, char** argv) {
   const umvs::DepthMetrics all = umvs::combine_depth_metrics(per_view);
 
   if (args.on("json")) {
-    std::cout << "{\"rel_thresholds\": " << jlist(cfg.rel_thresholds) << ", \"abs_thresholds\": " << jlist(cfg.abs_thresholds)
-              << ",\n \"views\": [\n";
+    nlohmann::ordered_json out = {{"rel_thresholds", jlist(cfg.rel_thresholds)}, {"abs_thresholds", jlist(cfg.abs_thresholds)}};
+    out["views"] = nlohmann::ordered_json::array();
     for (size_t i = 0; i < ids.size(); ++i) {
-      std::cout << "  {\"view\": " << ids[i] << ", " << depth_json(per_view[i]) << "}" << (i + 1 < ids.size() ? "," : "") << "\n";
+      nlohmann::ordered_json view = {{"view", ids[i]}};
+      view.update(depth_json(per_view[i]));
+      out["views"].push_back(view);
     }
-    std::cout << " ],\n \"overall\": {" << depth_json(all) << "}}\n";
+    out["overall"] = depth_json(all);
+    std::cout << out.dump(1) << "\n";
     return 0;
   }
   std::ostringstream head;
@@ -221,14 +218,14 @@ int eval_cloud(int argc, char** argv) {
   if (gt.empty()) throw std::runtime_error("ground-truth cloud " + args.str("gt") + " has no points");
   const umvs::CloudMetrics m = umvs::evaluate_cloud(est, gt, cfg);
   if (args.on("json")) {
-    std::cout << "{\"est_points\": " << m.est_points << ", \"gt_points\": " << m.gt_points
-              << ", \"accuracy_mean\": " << jnum(m.accuracy_mean) << ", \"accuracy_median\": " << jnum(m.accuracy_median)
-              << ", \"completeness_mean\": " << jnum(m.completeness_mean)
-              << ", \"completeness_median\": " << jnum(m.completeness_median) << ", \"overall\": " << jnum(m.overall)
-              << ", \"accuracy_outliers\": " << jnum(m.accuracy_outliers)
-              << ", \"completeness_outliers\": " << jnum(m.completeness_outliers) << ",\n \"thresholds\": " << jlist(m.thresholds)
-              << ", \"precision\": " << jlist(m.precision) << ", \"recall\": " << jlist(m.recall)
-              << ", \"fscore\": " << jlist(m.fscore) << "}\n";
+    const nlohmann::ordered_json out = {
+        {"est_points", m.est_points}, {"gt_points", m.gt_points}, {"accuracy_mean", jnum(m.accuracy_mean)},
+        {"accuracy_median", jnum(m.accuracy_median)}, {"completeness_mean", jnum(m.completeness_mean)},
+        {"completeness_median", jnum(m.completeness_median)}, {"overall", jnum(m.overall)},
+        {"accuracy_outliers", jnum(m.accuracy_outliers)}, {"completeness_outliers", jnum(m.completeness_outliers)},
+        {"thresholds", jlist(m.thresholds)}, {"precision", jlist(m.precision)}, {"recall", jlist(m.recall)},
+        {"fscore", jlist(m.fscore)}};
+    std::cout << out.dump(1) << "\n";
     return 0;
   }
   std::cout << "cloud: " << args.str("est") << " (" << m.est_points << " points) vs " << args.str("gt") << " ("
