@@ -36,13 +36,6 @@ std::vector<double> parse_reals(const umvs::Args& args, const std::string& name)
   return out;
 }
 
-// JSON number: NaN and infinity are not JSON and print as null.
-nlohmann::ordered_json jnum(double v) { return std::isfinite(v) ? nlohmann::ordered_json(v) : nlohmann::ordered_json(nullptr); }
-nlohmann::ordered_json jlist(const std::vector<double>& v) {
-  nlohmann::ordered_json list = nlohmann::ordered_json::array();
-  for (double x : v) list.push_back(jnum(x));
-  return list;
-}
 std::string pct(double share) {
   char buf[16];
   std::snprintf(buf, sizeof(buf), "%6.2f", 100.0 * share);
@@ -75,10 +68,12 @@ std::string find_depth_dir(const std::string& root, const std::string& sub) {
   return root;
 }
 
+// JSON objects keep the order written here; NaN and infinity (metrics without pixels) print as
+// null, nlohmann-json's default.
 nlohmann::ordered_json depth_json(const umvs::DepthMetrics& m) {
-  return {{"gt_pixels", m.gt_pixels}, {"evaluated_pixels", m.evaluated_pixels}, {"completeness", jnum(m.completeness())},
-          {"mae", jnum(m.mae)}, {"abs_rel", jnum(m.abs_rel)}, {"rmse", jnum(m.rmse)},
-          {"within_rel", jlist(m.within_rel)}, {"within_abs", jlist(m.within_abs)}};
+  return {{"gt_pixels", m.gt_pixels}, {"evaluated_pixels", m.evaluated_pixels}, {"completeness", m.completeness()},
+          {"mae", m.mae}, {"abs_rel", m.abs_rel}, {"rmse", m.rmse},
+          {"within_rel", m.within_rel}, {"within_abs", m.within_abs}};
 }
 
 int eval_depth(int argc, char** argv) {
@@ -161,7 +156,7 @@ int eval_depth(int argc, char** argv) {
   const umvs::DepthMetrics all = umvs::combine_depth_metrics(per_view);
 
   if (args.on("json")) {
-    nlohmann::ordered_json out = {{"rel_thresholds", jlist(cfg.rel_thresholds)}, {"abs_thresholds", jlist(cfg.abs_thresholds)}};
+    nlohmann::ordered_json out = {{"rel_thresholds", cfg.rel_thresholds}, {"abs_thresholds", cfg.abs_thresholds}};
     out["views"] = nlohmann::ordered_json::array();
     for (size_t i = 0; i < ids.size(); ++i) {
       nlohmann::ordered_json view = {{"view", ids[i]}};
@@ -219,12 +214,12 @@ int eval_cloud(int argc, char** argv) {
   const umvs::CloudMetrics m = umvs::evaluate_cloud(est, gt, cfg);
   if (args.on("json")) {
     const nlohmann::ordered_json out = {
-        {"est_points", m.est_points}, {"gt_points", m.gt_points}, {"accuracy_mean", jnum(m.accuracy_mean)},
-        {"accuracy_median", jnum(m.accuracy_median)}, {"completeness_mean", jnum(m.completeness_mean)},
-        {"completeness_median", jnum(m.completeness_median)}, {"overall", jnum(m.overall)},
-        {"accuracy_outliers", jnum(m.accuracy_outliers)}, {"completeness_outliers", jnum(m.completeness_outliers)},
-        {"thresholds", jlist(m.thresholds)}, {"precision", jlist(m.precision)}, {"recall", jlist(m.recall)},
-        {"fscore", jlist(m.fscore)}};
+        {"est_points", m.est_points}, {"gt_points", m.gt_points}, {"accuracy_mean", m.accuracy_mean},
+        {"accuracy_median", m.accuracy_median}, {"completeness_mean", m.completeness_mean},
+        {"completeness_median", m.completeness_median}, {"overall", m.overall},
+        {"accuracy_outliers", m.accuracy_outliers}, {"completeness_outliers", m.completeness_outliers},
+        {"thresholds", m.thresholds}, {"precision", m.precision}, {"recall", m.recall},
+        {"fscore", m.fscore}};
     std::cout << out.dump(1) << "\n";
     return 0;
   }
