@@ -23,7 +23,7 @@ PACKAGES=(
   # ROS 1 libraries the nodes use
   libroscpp-dev libnodeletlib-dev libnodelet-dev pluginlib-dev
   libtf2-dev libtf2-ros-dev libtf2-eigen-dev
-  libcv-bridge-dev libimage-transport-dev libmessage-filters-dev
+  libimage-transport-dev libmessage-filters-dev
   librosbag-dev librosbag-storage-dev
   libdynamic-reconfigure-config-init-mutex-dev python3-dynamic-reconfigure  # live tuning
   # PCL at the edge (clouds published as pcl::PointCloud, .pcd files, outlier removal)

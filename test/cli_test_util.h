@@ -19,13 +19,15 @@ namespace umvs::test {
 
 struct Result {
   int status = -1;     // exit status (-1: killed or not run)
-  std::string output;  // stdout and stderr
+  std::string output;  // stdout and/or stderr (see run_umvs)
 };
 
-// `umvs ARGS` through the shell (arguments are ours, quoted where needed).
-inline Result run_umvs(const std::string& args) {
+// `umvs ARGS` through the shell (arguments are ours, quoted where needed). `redirect` chooses what
+// Result::output holds: stdout and stderr (default), only stdout ("2>/dev/null") or only stderr
+// ("2>&1 >/dev/null").
+inline Result run_umvs(const std::string& args, const std::string& redirect = "2>&1") {
   Result r;
-  const std::string cmd = umvs_binary() + " " + args + " 2>&1";
+  const std::string cmd = umvs_binary() + " " + args + " " + redirect;
   FILE* pipe = ::popen(cmd.c_str(), "r");
   if (!pipe) return r;
   char buf[4096];

@@ -99,6 +99,47 @@ TEST(CameraInfoMessages, ZeroOrNaNIntrinsicsAreRefused) {
   EXPECT_NE(camera_info_refusal(no_size).find("zero image size"), std::string::npos);
 }
 
+// Poses and tf transforms (tf2_eigen, ros_conversions): the same rigid transform either way, the
+// quaternion normalised when nearly unit, refused when not.
+TEST(PoseMessages, TransformsAndPosesGiveTheSameMatrixAndBadRotationsAreRefused) {
+  geometry_msgs::Transform quarter_turn;  // 90 degrees about z, then (1, 2, 3)
+  quarter_turn.translation.x = 1;
+  quarter_turn.translation.y = 2;
+  quarter_turn.translation.z = 3;
+  quarter_turn.rotation.z = std::sqrt(0.5);
+  quarter_turn.rotation.w = std::sqrt(0.5);
+  Eigen::Matrix4d expected;
+  expected << 0, -1, 0, 1,  //
+      1, 0, 0, 2,           //
+      0, 0, 1, 3,           //
+      0, 0, 0, 1;
+  EXPECT_TRUE(transform_to_matrix(quarter_turn).isApprox(expected, 1e-12)) << transform_to_matrix(quarter_turn);
+  EXPECT_TRUE(pose_to_matrix(matrix_to_pose(expected)).isApprox(expected, 1e-12));
+  EXPECT_TRUE(transform_to_matrix(matrix_to_transform(expected)).isApprox(expected, 1e-12));
+
+  auto nearly_unit = quarter_turn;  // norm 1.0005: used normalised, not as a scaled rotation
+  nearly_unit.rotation.z *= 1.0005;
+  nearly_unit.rotation.w *= 1.0005;
+  EXPECT_TRUE(transform_to_matrix(nearly_unit).isApprox(expected, 1e-12)) << transform_to_matrix(nearly_unit);
+
+  auto refusal = [](const geometry_msgs::Transform& t) {
+    try {
+      transform_to_matrix(t);
+    } catch (const std::invalid_argument& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  auto scaled = quarter_turn;
+  scaled.rotation.w *= 1.1;
+  EXPECT_NE(refusal(scaled).find("not a unit quaternion"), std::string::npos) << refusal(scaled);
+  auto nan_translation = quarter_turn;
+  nan_translation.translation.y = std::nan("");
+  EXPECT_EQ(refusal(nan_translation), "pose has non-finite values");
+  geometry_msgs::Pose zero_rotation;  // all-zero quaternion: a default-constructed message
+  EXPECT_THROW(pose_to_matrix(zero_rotation), std::invalid_argument);
+}
+
 TEST(BagWriter, NeverWritesThroughALinkPlantedAtTheOldTemporaryName) {
   namespace fs = std::filesystem;
   const auto dir = test::temp_dir("bag_planted_tmp");

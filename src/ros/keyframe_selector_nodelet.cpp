@@ -149,10 +149,12 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
                             world_frame_.c_str(), camera_frame.c_str(), image->header.stamp.toSec(), e.what());
       return;
     }
-    const geometry_msgs::Pose pose = umvs::pose_from_transform(tf.transform);
+    geometry_msgs::Pose pose;  // T_world_camera, forwarded in the keyframe sets
     try {
-      camera.T_cam_world = umvs::pose_to_matrix(pose).inverse();
+      const Eigen::Matrix4d T_world_camera = umvs::transform_to_matrix(tf.transform);
+      camera.T_cam_world = T_world_camera.inverse();
       camera.validate("camera pose");
+      pose = umvs::matrix_to_pose(T_world_camera);
     } catch (const std::exception& e) {
       NODELET_ERROR_THROTTLE(2.0, "keyframe_selector: invalid pose of '%s' in '%s' at %.3f: %s; frame skipped",
                              camera_frame.c_str(), world_frame_.c_str(), image->header.stamp.toSec(), e.what());

@@ -1,15 +1,44 @@
 #include "unsup_mvs/tools/args.h"
 
+#include <CLI/CLI.hpp>
+
+#include <algorithm>
+#include <cstdlib>
 #include <iostream>
 #include <sstream>
 #include <stdexcept>
 
 namespace umvs {
+namespace {
 
-Args::Args(std::string command, std::string usage) : command_(std::move(command)), usage_(std::move(usage)) {}
+constexpr int kHelpColumn = 34;  // --help: where the descriptions start
+
+bool is_number(const std::string& text) {
+  if (text.empty()) return false;
+  char* end = nullptr;
+  std::strtod(text.c_str(), &end);
+  return end == text.c_str() + text.size();
+}
+
+}  // namespace
+
+Args::Args(std::string command, std::string description)
+    : app_(std::make_unique<CLI::App>(std::move(description), "umvs " + command)) {
+  app_->get_formatter()->column_width(kHelpColumn);
+}
+Args::~Args() = default;
+Args::Args(Args&&) noexcept = default;
+Args& Args::operator=(Args&&) noexcept = default;
 
 Args& Args::option(const std::string& name, const std::string& def, const std::string& help) {
-  specs_[name] = {def, help, false, false, false};
+  CLI::Option* opt = app_->add_option("--" + name, values_[name], help)
+                         ->expected(1)
+                         ->allow_extra_args(false)  // one value per occurrence
+                         ->multi_option_policy(CLI::MultiOptionPolicy::TakeLast);
+  if (!def.empty()) opt->default_str(def);
+  if (is_number(def)) opt->check(CLI::Validator(CLI::Number).description(""))->type_name("NUMBER");
+  else opt->type_name("TEXT");
+  defaults_[name] = def;
   order_.push_back(name);
   return *this;
 }
@@ -19,51 +48,35 @@ Args& Args::option(const std::string& name, double def, const std::string& help)
   return option(name, text.str(), help);
 }
 Args& Args::flag(const std::string& name, const std::string& help) {
-  specs_[name] = {"", help, true, false, false};
+  app_->add_flag("--" + name, flags_[name], help);
+  defaults_[name] = "";
   order_.push_back(name);
   return *this;
 }
 Args& Args::required(const std::string& name, const std::string& help) {
-  specs_[name] = {"", help, false, true, false};
-  order_.push_back(name);
+  option(name, "", help);
+  app_->get_option("--" + name)->required();
   return *this;
 }
 Args& Args::repeated(const std::string& name, const std::string& help) {
-  specs_[name] = {"", help, false, false, true};
-  order_.push_back(name);
+  option(name, "", help);
+  app_->get_option("--" + name)->multi_option_policy(CLI::MultiOptionPolicy::TakeAll)->description(help + " (repeatable)");
   return *this;
 }
 
 bool Args::parse(int argc, char** argv) {
-  for (int i = 0; i < argc; ++i) {
-    std::string arg = argv[i];
-    if (arg == "--help" || arg == "-h") {
-      std::cout << usage();
-      return false;
-    }
-    if (arg.rfind("--", 0) != 0) throw std::invalid_argument("unexpected argument '" + arg + "' (options start with --)");
-    std::string name = arg.substr(2), value;
-    const auto eq = name.find('=');
-    const bool inline_value = eq != std::string::npos;
-    if (inline_value) {
-      value = name.substr(eq + 1);
-      name = name.substr(0, eq);
-    }
-    auto it = specs_.find(name);
-    if (it == specs_.end()) throw std::invalid_argument("unknown option --" + name + " (see umvs " + command_ + " --help)");
-    if (it->second.is_flag) {
-      values_[name] = {inline_value ? value : "1"};
-      continue;
-    }
-    if (!inline_value) {
-      if (i + 1 >= argc) throw std::invalid_argument("option --" + name + " needs a value");
-      value = argv[++i];
-    }
-    if (it->second.is_repeated) values_[name].push_back(value);
-    else values_[name] = {value};
+  std::vector<std::string> args(argv, argv + argc);
+  std::reverse(args.begin(), args.end());  // CLI11 takes them last first
+  try {
+    app_->parse(args);
+  } catch (const CLI::CallForHelp&) {
+    std::cout << usage();
+    return false;
+  } catch (const CLI::ParseError& e) {
+    throw std::invalid_argument(std::string(e.what()) + " (see " + app_->get_name() + " --help)");
   }
-  for (const auto& s : specs_) {
-    if (s.second.is_required && !values_.count(s.first)) throw std::invalid_argument("missing required option --" + s.first);
+  for (const auto& f : flags_) {
+    if (app_->get_option("--" + f.first)->count() > 0) values_[f.first] = {f.second ? "1" : "0"};
   }
   return true;
 }
@@ -71,9 +84,9 @@ bool Args::parse(int argc, char** argv) {
 std::string Args::str(const std::string& name) const {
   auto v = values_.find(name);
   if (v != values_.end() && !v->second.empty()) return v->second.back();
-  auto s = specs_.find(name);
-  if (s == specs_.end()) throw std::logic_error("option --" + name + " was not declared");
-  return s->second.default_value;
+  auto d = defaults_.find(name);
+  if (d == defaults_.end()) throw std::logic_error("option --" + name + " was not declared");
+  return d->second;
 }
 
 int Args::integer(const std::string& name) const {
@@ -98,7 +111,10 @@ double Args::real(const std::string& name) const {
   throw std::invalid_argument("option --" + name + " needs a number, got '" + s + "'");
 }
 
-bool Args::given(const std::string& name) const { return values_.count(name) > 0; }
+bool Args::given(const std::string& name) const {
+  auto v = values_.find(name);
+  return v != values_.end() && !v->second.empty();
+}
 
 bool Args::on(const std::string& name) const {
   const std::string s = str(name);
@@ -108,7 +124,7 @@ bool Args::on(const std::string& name) const {
 std::vector<std::string> Args::all(const std::string& name) const {
   std::vector<std::string> out;
   auto v = values_.find(name);
-  std::vector<std::string> raw = v != values_.end() ? v->second : std::vector<std::string>{str(name)};
+  std::vector<std::string> raw = given(name) ? v->second : std::vector<std::string>{str(name)};
   for (const auto& item : raw) {
     std::stringstream ss(item);
     for (std::string part; std::getline(ss, part, ',');) {
@@ -132,19 +148,16 @@ std::vector<int> Args::integers(const std::string& name) const {
   return out;
 }
 
-std::string Args::usage() const {
-  std::ostringstream os;
-  os << "usage: umvs " << command_ << " [options]\n" << usage_ << "\n\noptions:\n";
-  for (const auto& name : order_) {
-    const auto& s = specs_.at(name);
-    std::string left = "  --" + name + (s.is_flag ? "" : " VALUE");
-    os << left << std::string(left.size() < 28 ? 28 - left.size() : 1, ' ') << s.help;
-    if (s.is_required) os << " (required)";
-    else if (!s.is_flag && !s.default_value.empty()) os << " [default: " << s.default_value << "]";
-    if (s.is_repeated) os << " (repeatable)";
-    os << "\n";
-  }
-  return os.str();
+std::string Args::usage() const { return app_->help(); }
+
+std::string subcommands_help(const std::string& program, const std::string& description,
+                             const std::vector<std::pair<std::string, std::string>>& subcommands) {
+  CLI::App app(description, program);
+  app.get_formatter()->column_width(kHelpColumn);
+  app.require_subcommand(1);
+  for (const auto& s : subcommands) app.add_subcommand(s.first, s.second);
+  app.footer("(" + program + " <subcommand> --help for its options)");
+  return app.help();
 }
 
 }  // namespace umvs

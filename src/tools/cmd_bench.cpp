@@ -9,6 +9,7 @@
 #include <sstream>
 #include <thread>
 
+#include <nlohmann/json.hpp>
 #include <sys/resource.h>
 
 #include "unsup_mvs/core/device.h"
@@ -126,12 +127,12 @@ int bench_fusion(const Args& args, const torch::Device& device) {
   std::ostringstream device_name;
   device_name << device;
   if (args.on("json")) {
-    std::cout << std::setprecision(6) << "{\"case\": \"fusion\", \"width\": " << W << ", \"height\": " << H << ", \"sources\": " << S
-              << ", \"threads\": " << torch::get_num_threads() << ", \"device\": \"" << device_name.str() << "\", \"runs\": " << s.runs
-              << ", \"median_s_per_view\": " << s.median << ", \"min_s\": " << s.min << ", \"max_s\": " << s.max
-              << ", \"points_per_s\": " << rate << ", \"points\": " << points << ", \"peak_rss_mib\": " << peak_rss_mib()
-              << ", \"stages_median_s_per_view\": {\"ranking\": " << rank_s << ", \"consistency\": " << check_s
-              << ", \"points\": " << points_s << "}}\n";
+    const nlohmann::ordered_json out = {
+        {"case", "fusion"}, {"width", W}, {"height", H}, {"sources", S}, {"threads", torch::get_num_threads()},
+        {"device", device_name.str()}, {"runs", s.runs}, {"median_s_per_view", s.median}, {"min_s", s.min}, {"max_s", s.max},
+        {"points_per_s", rate}, {"points", points}, {"peak_rss_mib", peak_rss_mib()},
+        {"stages_median_s_per_view", {{"ranking", rank_s}, {"consistency", check_s}, {"points", points_s}}}};
+    std::cout << out.dump() << "\n";
   } else {
     std::cout << std::fixed << std::setprecision(3) << "fusion " << W << "x" << H << " reference, " << S << " sources, device="
               << device_name.str() << " threads=" << torch::get_num_threads() << ": median " << s.median << " s per reference view (min "
@@ -237,24 +238,24 @@ UMVS_COMMAND(bench, "time and memory of the network on synthetic input") {
   device_name << device;
   const std::string path_name = path == "autograd" ? "autograd" : "fast";
   if (args.on("json")) {
-    std::cout << std::setprecision(6) << "{\"case\": \"network\", \"path\": \"" << path_name << "\", \"width\": " << W
-              << ", \"height\": " << H << ", \"num_depth\": " << D << ", \"views\": " << V
-              << ", \"threads\": " << torch::get_num_threads() << ", \"device\": \"" << device_name.str()
-              << "\", \"tuned\": " << (args.on("no-tuning") ? "false" : "true") << ", \"runs\": " << s.runs
-              << ", \"median_s\": " << s.median << ", \"min_s\": " << s.min << ", \"max_s\": " << s.max
-              << ", \"gflop\": " << gflop << ", \"gflops\": " << gflop / s.median << ", \"peak_rss_mib\": " << memory_mib
-              << ", \"minor_faults_per_run\": " << faults_per_run;
+    nlohmann::ordered_json out = {
+        {"case", "network"}, {"path", path_name}, {"width", W}, {"height", H}, {"num_depth", D}, {"views", V},
+        {"threads", torch::get_num_threads()}, {"device", device_name.str()}, {"tuned", !args.on("no-tuning")},
+        {"runs", s.runs}, {"median_s", s.median}, {"min_s", s.min}, {"max_s", s.max}, {"gflop", gflop},
+        {"gflops", gflop / s.median}, {"peak_rss_mib", memory_mib}, {"minor_faults_per_run", faults_per_run}};
     if (have_stages) {
-      std::cout << ", \"stages_median_s\": {\"features\": " << umvs::summarize(features_s).median
-                << ", \"cost_volume\": " << umvs::summarize(volume_s).median << ", \"unet3d\": " << umvs::summarize(unet_s).median
-                << ", \"regression\": " << umvs::summarize(regression_s).median
-                << ", \"refinement\": " << umvs::summarize(refine_s).median << "}";
+      out["stages_median_s"] = {{"features", umvs::summarize(features_s).median},
+                                {"cost_volume", umvs::summarize(volume_s).median},
+                                {"unet3d", umvs::summarize(unet_s).median},
+                                {"regression", umvs::summarize(regression_s).median},
+                                {"refinement", umvs::summarize(refine_s).median}};
     }
     if (path == "both") {
       const double a = umvs::summarize(autograd_s).median;
-      std::cout << ", \"autograd_median_s\": " << a << ", \"autograd_over_fast\": " << a / s.median;
+      out["autograd_median_s"] = a;
+      out["autograd_over_fast"] = a / s.median;
     }
-    std::cout << "}\n";
+    std::cout << out.dump() << "\n";
   } else {
     std::cout << std::fixed << std::setprecision(3) << "network " << W << "x" << H << " D=" << D << " V=" << V
               << " device=" << device_name.str() << " threads=" << torch::get_num_threads() << " path=" << path_name

@@ -7,6 +7,8 @@
 #include <iostream>
 #include <sstream>
 
+#include <nlohmann/json.hpp>
+
 #include "unsup_mvs/core/device.h"
 #include "unsup_mvs/core/metrics.h"
 #include "unsup_mvs/io/array_io.h"
@@ -34,18 +36,6 @@ std::vector<double> parse_reals(const umvs::Args& args, const std::string& name)
   return out;
 }
 
-// JSON number (NaN and infinity are not JSON: null).
-std::string jnum(double v) {
-  if (!std::isfinite(v)) return "null";
-  char buf[32];
-  std::snprintf(buf, sizeof(buf), "%.9g", v);
-  return buf;
-}
-std::string jlist(const std::vector<double>& v) {
-  std::string s = "[";
-  for (size_t i = 0; i < v.size(); ++i) s += (i ? ", " : "") + jnum(v[i]);
-  return s + "]";
-}
 std::string pct(double share) {
   char buf[16];
   std::snprintf(buf, sizeof(buf), "%6.2f", 100.0 * share);
@@ -78,13 +68,12 @@ std::string find_depth_dir(const std::string& root, const std::string& sub) {
   return root;
 }
 
-std::string depth_json(const umvs::DepthMetrics& m) {
-  std::ostringstream os;
-  os << "\"gt_pixels\": " << m.gt_pixels << ", \"evaluated_pixels\": " << m.evaluated_pixels
-     << ", \"completeness\": " << jnum(m.completeness()) << ", \"mae\": " << jnum(m.mae)
-     << ", \"abs_rel\": " << jnum(m.abs_rel) << ", \"rmse\": " << jnum(m.rmse)
-     << ", \"within_rel\": " << jlist(m.within_rel) << ", \"within_abs\": " << jlist(m.within_abs);
-  return os.str();
+// JSON objects keep the order written here; NaN and infinity (metrics without pixels) print as
+// null, nlohmann-json's default.
+nlohmann::ordered_json depth_json(const umvs::DepthMetrics& m) {
+  return {{"gt_pixels", m.gt_pixels}, {"evaluated_pixels", m.evaluated_pixels}, {"completeness", m.completeness()},
+          {"mae", m.mae}, {"abs_rel", m.abs_rel}, {"rmse", m.rmse},
+          {"within_rel", m.within_rel}, {"within_abs", m.within_abs}};
 }
 
 int eval_depth(int argc, char** argv) {
@@ -167,12 +156,15 @@ int eval_depth(int argc, char** argv) {
   const umvs::DepthMetrics all = umvs::combine_depth_metrics(per_view);
 
   if (args.on("json")) {
-    std::cout << "{\"rel_thresholds\": " << jlist(cfg.rel_thresholds) << ", \"abs_thresholds\": " << jlist(cfg.abs_thresholds)
-              << ",\n \"views\": [\n";
+    nlohmann::ordered_json out = {{"rel_thresholds", cfg.rel_thresholds}, {"abs_thresholds", cfg.abs_thresholds}};
+    out["views"] = nlohmann::ordered_json::array();
     for (size_t i = 0; i < ids.size(); ++i) {
-      std::cout << "  {\"view\": " << ids[i] << ", " << depth_json(per_view[i]) << "}" << (i + 1 < ids.size() ? "," : "") << "\n";
+      nlohmann::ordered_json view = {{"view", ids[i]}};
+      view.update(depth_json(per_view[i]));
+      out["views"].push_back(view);
     }
-    std::cout << " ],\n \"overall\": {" << depth_json(all) << "}}\n";
+    out["overall"] = depth_json(all);
+    std::cout << out.dump(1) << "\n";
     return 0;
   }
   std::ostringstream head;
@@ -221,14 +213,14 @@ int eval_cloud(int argc, char** argv) {
   if (gt.empty()) throw std::runtime_error("ground-truth cloud " + args.str("gt") + " has no points");
   const umvs::CloudMetrics m = umvs::evaluate_cloud(est, gt, cfg);
   if (args.on("json")) {
-    std::cout << "{\"est_points\": " << m.est_points << ", \"gt_points\": " << m.gt_points
-              << ", \"accuracy_mean\": " << jnum(m.accuracy_mean) << ", \"accuracy_median\": " << jnum(m.accuracy_median)
-              << ", \"completeness_mean\": " << jnum(m.completeness_mean)
-              << ", \"completeness_median\": " << jnum(m.completeness_median) << ", \"overall\": " << jnum(m.overall)
-              << ", \"accuracy_outliers\": " << jnum(m.accuracy_outliers)
-              << ", \"completeness_outliers\": " << jnum(m.completeness_outliers) << ",\n \"thresholds\": " << jlist(m.thresholds)
-              << ", \"precision\": " << jlist(m.precision) << ", \"recall\": " << jlist(m.recall)
-              << ", \"fscore\": " << jlist(m.fscore) << "}\n";
+    const nlohmann::ordered_json out = {
+        {"est_points", m.est_points}, {"gt_points", m.gt_points}, {"accuracy_mean", m.accuracy_mean},
+        {"accuracy_median", m.accuracy_median}, {"completeness_mean", m.completeness_mean},
+        {"completeness_median", m.completeness_median}, {"overall", m.overall},
+        {"accuracy_outliers", m.accuracy_outliers}, {"completeness_outliers", m.completeness_outliers},
+        {"thresholds", m.thresholds}, {"precision", m.precision}, {"recall", m.recall},
+        {"fscore", m.fscore}};
+    std::cout << out.dump(1) << "\n";
     return 0;
   }
   std::cout << "cloud: " << args.str("est") << " (" << m.est_points << " points) vs " << args.str("gt") << " ("
@@ -248,18 +240,19 @@ int eval_cloud(int argc, char** argv) {
 }  // namespace
 
 UMVS_COMMAND(eval, "depth-map (eval depth) and point-cloud (eval cloud) metrics against ground truth") {
-  const std::string usage = "usage: umvs eval depth --est DIR --gt DIR [options]\n       umvs eval cloud --est PLY --gt PLY [options]\n"
-                            "(umvs eval depth --help, umvs eval cloud --help for the options)\n";
+  const std::string help = umvs::subcommands_help(
+      "umvs eval", "Metrics against ground truth: umvs eval depth --est DIR --gt DIR, umvs eval cloud --est PLY --gt PLY.",
+      {{"depth", "depth maps of `umvs infer` against depth_gt/"}, {"cloud", "a fused cloud against a ground-truth cloud"}});
   if (argc < 1) {
-    std::cerr << usage;
+    std::cerr << help;
     return 2;
   }
   const std::string mode = argv[0];
   if (mode == "depth") return eval_depth(argc - 1, argv + 1);
   if (mode == "cloud") return eval_cloud(argc - 1, argv + 1);
   if (mode == "--help" || mode == "-h") {
-    std::cout << usage;
+    std::cout << help;
     return 0;
   }
-  throw std::invalid_argument("unknown evaluation '" + mode + "' (expected depth or cloud)\n" + usage);
+  throw std::invalid_argument("unknown evaluation '" + mode + "' (expected depth or cloud; see umvs eval --help)");
 }

@@ -27,7 +27,9 @@ UMVS_COMMAND(import, "convert a Middlebury or RGB-D data set to an MVSNet-format
       "ground-truth depth (rgbd), widened by --margin. pair.txt ranks neighbours by MVSNet's\n"
       "view-selection score.";
   if (argc < 1 || std::string(argv[0]) == "--help" || std::string(argv[0]) == "-h") {
-    std::cout << usage << "\n";
+    const std::string help = umvs::subcommands_help(
+        "umvs import", usage, {{"middlebury", "Middlebury multi-view (*_par.txt calibration)"}, {"rgbd", "color/, depth/ and pose.txt"}});
+    (argc < 1 ? std::cerr : std::cout) << help;
     return argc < 1 ? 2 : 0;
   }
   const std::string kind = argv[0];
@@ -88,5 +90,5 @@ UMVS_COMMAND(import, "convert a Middlebury or RGB-D data set to an MVSNet-format
     print_summary(umvs::import_rgbd(cfg), cfg.out_dir);
     return 0;
   }
-  throw std::invalid_argument("unknown data set kind '" + kind + "' (expected middlebury | rgbd)\n" + usage);
+  throw std::invalid_argument("unknown data set kind '" + kind + "' (expected middlebury | rgbd; see umvs import --help)");
 }

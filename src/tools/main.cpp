@@ -1,6 +1,7 @@
 // umvs: the unsup_mvs command line. Each subcommand lives in src/tools/cmd_*.cpp.
 #include <iostream>
 
+#include "unsup_mvs/tools/args.h"
 #include "unsup_mvs/tools/command.h"
 
 namespace umvs {
@@ -12,11 +13,9 @@ std::map<std::string, CommandInfo>& command_table() {
 
 namespace {
 void print_usage() {
-  std::cout << "umvs: unsupervised multi-view stereo (MVSNet + robust photometric loss)\n\n"
-            << "usage: umvs <command> [options]   (umvs <command> --help for its options)\n\ncommands:\n";
-  for (const auto& c : umvs::command_table()) {
-    std::cout << "  " << c.first << std::string(c.first.size() < 8 ? 8 - c.first.size() : 1, ' ') << c.second.summary << "\n";
-  }
+  std::vector<std::pair<std::string, std::string>> commands;
+  for (const auto& c : umvs::command_table()) commands.emplace_back(c.first, c.second.summary);
+  std::cout << umvs::subcommands_help("umvs", "umvs: unsupervised multi-view stereo (MVSNet + robust photometric loss)", commands);
 }
 }  // namespace
 

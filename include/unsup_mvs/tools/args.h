@@ -1,19 +1,31 @@
-// A small, strict command-line parser for the umvs subcommands: "--name value" and "--flag".
-// Unknown flags, missing values and unparsable numbers are errors that name the flag.
+// The options of one umvs subcommand, declared once and parsed by CLI11: "--name value",
+// "--name=value" and "--flag". CLI11 writes --help (with the defaults) from the declarations and
+// refuses unknown options, missing values and non-numbers where the default is a number, naming
+// the option.
 #pragma once
 
 #include <map>
+#include <memory>
 #include <string>
+#include <utility>
 #include <vector>
+
+namespace CLI {
+class App;
+}
 
 namespace umvs {
 
 class Args {
  public:
-  // `usage` is printed by --help and after errors.
-  Args(std::string command, std::string usage);
+  // `description` is printed by --help above the options.
+  Args(std::string command, std::string description);
+  ~Args();
+  Args(Args&&) noexcept;
+  Args& operator=(Args&&) noexcept;
 
-  // Declare options before parse(). `help` appears in the usage text.
+  // Declare options before parse(). `help` appears in the usage text. An option whose default
+  // is a number only takes numbers.
   Args& option(const std::string& name, const std::string& default_value, const std::string& help);
   // A numeric default, usually a Config struct's own field, so that the command line and the
   // library cannot disagree on it.
@@ -24,7 +36,7 @@ class Args {
   Args& repeated(const std::string& name, const std::string& help);
 
   // Returns false when --help was given (usage already printed). Throws std::invalid_argument
-  // with a message naming the offending flag otherwise.
+  // with a message naming the offending option otherwise.
   bool parse(int argc, char** argv);
 
   std::string str(const std::string& name) const;
@@ -35,18 +47,21 @@ class Args {
   std::vector<std::string> all(const std::string& name) const;  // repeated or comma-separated
   std::vector<int> integers(const std::string& name) const;     // comma-separated ints
 
-  std::string usage() const;
+  std::string usage() const;  // CLI11's help text
   const std::vector<std::string>& names() const { return order_; }  // declared options, in order
 
  private:
-  struct Spec {
-    std::string default_value, help;
-    bool is_flag = false, is_required = false, is_repeated = false;
-  };
-  std::string command_, usage_;
+  std::unique_ptr<CLI::App> app_;
   std::vector<std::string> order_;
-  std::map<std::string, Spec> specs_;
+  std::map<std::string, std::string> defaults_;
+  // CLI11 writes into these (std::map keeps their addresses while options are added).
   std::map<std::string, std::vector<std::string>> values_;
+  std::map<std::string, bool> flags_;
 };
+
+// --help of a program or command whose first argument picks what runs (umvs <command>,
+// umvs eval depth|cloud): CLI11's help listing each (name, summary) as a subcommand.
+std::string subcommands_help(const std::string& program, const std::string& description,
+                             const std::vector<std::pair<std::string, std::string>>& subcommands);
 
 }  // namespace umvs

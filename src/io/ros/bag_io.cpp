@@ -64,11 +64,7 @@ void BagWriter::write(const PosedImage& frame) {
   tf.header.stamp = t;
   tf.header.frame_id = topics_.world_frame;
   tf.child_frame_id = topics_.camera_frame;
-  const geometry_msgs::Pose pose = matrix_to_pose(frame.camera.T_world_cam());
-  tf.transform.translation.x = pose.position.x;
-  tf.transform.translation.y = pose.position.y;
-  tf.transform.translation.z = pose.position.z;
-  tf.transform.rotation = pose.orientation;
+  tf.transform = matrix_to_transform(frame.camera.T_world_cam());
   tf2_msgs::TFMessage tfm;
   tfm.transforms.push_back(tf);
 
@@ -155,7 +151,7 @@ BagReadStats for_each_posed_image(const std::string& path, const BagTopics& topi
       const sensor_msgs::CameraInfo::ConstPtr info = it == infos.begin() ? it->second : std::prev(it)->second;
       const std::string frame = img->header.frame_id.empty() ? topics.camera_frame : img->header.frame_id;
       const double stamp = img->header.stamp.toSec();
-      geometry_msgs::Pose pose;  // T_world_camera
+      Eigen::Matrix4d T_world_camera;
       if (!has_tf) {
         ++stats.without_pose;
         note("no transform found from '" + topics.world_frame + "' to the camera frame '" + frame +
@@ -163,8 +159,7 @@ BagReadStats for_each_posed_image(const std::string& path, const BagTopics& topi
         continue;
       }
       try {
-        pose = pose_from_transform(tf_buffer.lookupTransform(topics.world_frame, frame, img->header.stamp).transform);
-        pose_to_matrix(pose);  // a bad pose is reported as such
+        T_world_camera = transform_to_matrix(tf_buffer.lookupTransform(topics.world_frame, frame, img->header.stamp).transform);
       } catch (const tf2::TransformException& e) {
         ++stats.without_pose;
         note("no transform found from '" + topics.world_frame + "' to the camera frame '" + frame + "' at " +
@@ -177,7 +172,7 @@ BagReadStats for_each_posed_image(const std::string& path, const BagTopics& topi
       }
       PosedImage out;
       try {
-        out = posed_image_from_msgs(*img, *info, pose, rectified);
+        out = posed_image_from_msgs(*img, *info, T_world_camera, rectified);
       } catch (const std::invalid_argument& e) {
         ++stats.invalid;
         note("image at " + std::to_string(stamp) + ": " + e.what());

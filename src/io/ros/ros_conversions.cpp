@@ -1,6 +1,7 @@
 #include "unsup_mvs/io/ros/ros_conversions.h"
 
 #include <sensor_msgs/image_encodings.h>
+#include <tf2_eigen/tf2_eigen.h>
 #include <torch/torch.h>
 
 #include <cmath>
@@ -170,54 +171,63 @@ sensor_msgs::CameraInfo camera_info_from_camera(const Camera& camera, const std_
   return info;
 }
 
-Eigen::Matrix4d pose_to_matrix(const geometry_msgs::Pose& pose) {
-  const auto& p = pose.position;
-  const auto& o = pose.orientation;
-  for (double v : {p.x, p.y, p.z, o.x, o.y, o.z, o.w}) {
-    if (!std::isfinite(v)) throw std::invalid_argument("pose has non-finite values");
-  }
-  Eigen::Quaterniond q(o.w, o.x, o.y, o.z);
+namespace {
+
+// tf2_eigen turns the quaternion into a rotation as given: refuse non-finite poses and quaternions
+// far from unit length, and hand it the normalised one.
+geometry_msgs::Quaternion checked_rotation(const Eigen::Vector3d& translation, const geometry_msgs::Quaternion& rotation) {
+  Eigen::Quaterniond q;
+  tf2::fromMsg(rotation, q);
+  if (!translation.allFinite() || !q.coeffs().allFinite()) throw std::invalid_argument("pose has non-finite values");
   if (std::abs(q.norm() - 1.0) > 1e-3) {
     throw std::invalid_argument("pose orientation is not a unit quaternion (norm " + std::to_string(q.norm()) + ")");
   }
-  Eigen::Matrix4d T = Eigen::Matrix4d::Identity();
-  T.topLeftCorner<3, 3>() = q.normalized().toRotationMatrix();
-  T.topRightCorner<3, 1>() = Eigen::Vector3d(p.x, p.y, p.z);
-  return T;
+  return tf2::toMsg(q.normalized());
 }
 
-geometry_msgs::Pose matrix_to_pose(const Eigen::Matrix4d& T) {
-  const Eigen::Quaterniond q(Eigen::Matrix3d(T.topLeftCorner<3, 3>()));
-  geometry_msgs::Pose pose;
-  pose.position.x = T(0, 3);
-  pose.position.y = T(1, 3);
-  pose.position.z = T(2, 3);
-  pose.orientation.w = q.w();
-  pose.orientation.x = q.x();
-  pose.orientation.y = q.y();
-  pose.orientation.z = q.z();
-  return pose;
+}  // namespace
+
+Eigen::Matrix4d pose_to_matrix(const geometry_msgs::Pose& pose) {
+  geometry_msgs::Pose unit = pose;
+  unit.orientation = checked_rotation({pose.position.x, pose.position.y, pose.position.z}, pose.orientation);
+  Eigen::Isometry3d T;
+  tf2::fromMsg(unit, T);
+  return T.matrix();
 }
 
-geometry_msgs::Pose pose_from_transform(const geometry_msgs::Transform& transform) {
-  geometry_msgs::Pose pose;
-  pose.position.x = transform.translation.x;
-  pose.position.y = transform.translation.y;
-  pose.position.z = transform.translation.z;
-  pose.orientation = transform.rotation;
-  return pose;
+Eigen::Matrix4d transform_to_matrix(const geometry_msgs::Transform& transform) {
+  const auto& t = transform.translation;
+  geometry_msgs::TransformStamped unit;
+  unit.transform = transform;
+  unit.transform.rotation = checked_rotation({t.x, t.y, t.z}, transform.rotation);
+  return tf2::transformToEigen(unit).matrix();
+}
+
+geometry_msgs::Pose matrix_to_pose(const Eigen::Matrix4d& T) { return tf2::toMsg(Eigen::Isometry3d(T)); }
+
+geometry_msgs::Transform matrix_to_transform(const Eigen::Matrix4d& T) {
+  return tf2::eigenToTransform(Eigen::Isometry3d(T)).transform;
 }
 
 Camera posed_camera_from_msgs(const sensor_msgs::CameraInfo& info, const geometry_msgs::Pose& T_world_camera,
                               bool rectified) {
+  return posed_camera_from_msgs(info, pose_to_matrix(T_world_camera), rectified);
+}
+
+Camera posed_camera_from_msgs(const sensor_msgs::CameraInfo& info, const Eigen::Matrix4d& T_world_camera, bool rectified) {
   Camera camera = camera_from_info(info, rectified);
-  camera.T_cam_world = pose_to_matrix(T_world_camera).inverse();
+  camera.T_cam_world = T_world_camera.inverse();
   camera.validate();
   return camera;
 }
 
 PosedImage posed_image_from_msgs(const sensor_msgs::Image& image, const sensor_msgs::CameraInfo& info,
                                  const geometry_msgs::Pose& T_world_camera, bool rectified) {
+  return posed_image_from_msgs(image, info, pose_to_matrix(T_world_camera), rectified);
+}
+
+PosedImage posed_image_from_msgs(const sensor_msgs::Image& image, const sensor_msgs::CameraInfo& info,
+                                 const Eigen::Matrix4d& T_world_camera, bool rectified) {
   PosedImage out;
   out.stamp = image.header.stamp.toSec();
   out.camera = posed_camera_from_msgs(info, T_world_camera, rectified);

@@ -42,12 +42,14 @@ Camera camera_from_info(const sensor_msgs::CameraInfo& info, bool rectified);
 // Pinhole CameraInfo (no distortion, P = [K | 0]) of a camera.
 sensor_msgs::CameraInfo camera_info_from_camera(const Camera& camera, const std_msgs::Header& header);
 
-// geometry_msgs/Pose <-> 4x4 rigid transform (T_world_camera for camera poses). pose_to_matrix
-// throws std::invalid_argument for a non-finite pose or a quaternion far from unit length.
+// Rigid transforms of geometry_msgs and tf2 <-> 4x4 matrices, through tf2_eigen. For a camera the
+// matrix is T_world_camera, the camera's pose in the world (REP 103); a tf2 transform parent -> child
+// is the child's pose in the parent frame. The readers throw std::invalid_argument for non-finite
+// values or a quaternion far from unit length (a nearly unit one is normalised).
 Eigen::Matrix4d pose_to_matrix(const geometry_msgs::Pose& pose);
+Eigen::Matrix4d transform_to_matrix(const geometry_msgs::Transform& transform);
 geometry_msgs::Pose matrix_to_pose(const Eigen::Matrix4d& T);
-// A tf2 transform (parent -> child) as the child's pose in the parent frame.
-geometry_msgs::Pose pose_from_transform(const geometry_msgs::Transform& transform);
+geometry_msgs::Transform matrix_to_transform(const Eigen::Matrix4d& T);
 
 // A calibrated, posed image as the pipeline uses it.
 struct PosedImage {
@@ -61,10 +63,13 @@ struct PosedImage {
 // (the optical frame's pose in the world, REP 103), validated. Throws std::invalid_argument.
 Camera posed_camera_from_msgs(const sensor_msgs::CameraInfo& info, const geometry_msgs::Pose& T_world_camera,
                               bool rectified);
+Camera posed_camera_from_msgs(const sensor_msgs::CameraInfo& info, const Eigen::Matrix4d& T_world_camera, bool rectified);
 // The same plus the image as rgb8, which must have the CameraInfo's size (the image is not checked
 // against a pixel budget here: check_image_msg first where a bound applies). Throws
 // std::invalid_argument.
 PosedImage posed_image_from_msgs(const sensor_msgs::Image& image, const sensor_msgs::CameraInfo& info,
                                  const geometry_msgs::Pose& T_world_camera, bool rectified);
+PosedImage posed_image_from_msgs(const sensor_msgs::Image& image, const sensor_msgs::CameraInfo& info,
+                                 const Eigen::Matrix4d& T_world_camera, bool rectified);
 
 }  // namespace umvs

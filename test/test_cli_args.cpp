@@ -1,0 +1,136 @@
+// The umvs command line on CLI11 and nlohmann-json: every --help is CLI11's, written from the
+// options' declarations with their defaults; bad arguments are refused with the option's name and
+// exit status 2 on stderr; --json output parses.
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+#include <torch/torch.h>
+
+#include <filesystem>
+#include <map>
+#include <string>
+
+#include "cli_test_util.h"
+#include "test_util.h"
+#include "unsup_mvs/io/array_io.h"
+
+namespace umvs {
+namespace {
+
+namespace fs = std::filesystem;
+using test::contains;
+using test::Result;
+using test::run_umvs;
+
+const std::string kOnlyStdout = "2>/dev/null", kOnlyStderr = "2>&1 >/dev/null";
+
+TEST(CliHelp, EverySubcommandPrintsCli11HelpWithItsDefaults) {
+  // Each subcommand with one option as its help must show it: name, value type and default.
+  std::map<std::string, std::string> shown = {
+      {"bench", "--width NUMBER=640"},
+      {"eval depth", "--rel-thresholds TEXT=0.01,0.03"},
+      {"eval cloud", "--thresholds TEXT=0.002,0.005,0.01"},
+      {"fuse", "--window NUMBER=10"},
+      {"import middlebury", "--margin NUMBER=0.1"},
+      {"import rgbd", "--num-depth NUMBER=192"},
+      {"infer", "--device TEXT=cpu"},
+      {"render", "--height NUMBER=480"},
+      {"synth", "--scene TEXT=room"},
+      {"train", "--steps NUMBER=10000"},
+  };
+#ifdef UMVS_HAVE_ROS
+  shown["bag"] = "--rate NUMBER=2";
+#endif
+  for (const auto& [command, option] : shown) {
+    const Result r = run_umvs(command + " --help", kOnlyStdout);
+    EXPECT_EQ(r.status, 0) << command << ": " << r.output;
+    EXPECT_TRUE(contains(r.output, "Usage: umvs " + command + " [OPTIONS]")) << command << ": " << r.output;
+    EXPECT_TRUE(contains(r.output, "Options:\n  -h,--help")) << command << ": " << r.output;
+    EXPECT_TRUE(contains(r.output, option)) << command << ": " << r.output;
+    EXPECT_EQ(run_umvs(command + " -h").output, r.output) << command;
+  }
+  // The required options say so.
+  EXPECT_TRUE(contains(run_umvs("infer --help").output, "--checkpoint TEXT REQUIRED"));
+}
+
+TEST(CliHelp, CommandListsAreCli11Subcommands) {
+  const Result top = run_umvs("--help");
+  EXPECT_EQ(top.status, 0) << top.output;
+  EXPECT_TRUE(contains(top.output, "Usage: umvs [OPTIONS] SUBCOMMAND")) << top.output;
+  for (const std::string command : {"bench", "eval", "fuse", "import", "infer", "render", "synth", "train"}) {
+    EXPECT_TRUE(contains(top.output, "\n  " + command + " ")) << command << " not listed: " << top.output;
+  }
+  EXPECT_EQ(run_umvs("").status, 2);  // no command: the list, as a usage error
+  const Result eval = run_umvs("eval --help");
+  EXPECT_EQ(eval.status, 0);
+  EXPECT_TRUE(contains(eval.output, "Subcommands:") && contains(eval.output, "\n  depth ") && contains(eval.output, "\n  cloud "))
+      << eval.output;
+  const Result import = run_umvs("import --help");
+  EXPECT_EQ(import.status, 0);
+  EXPECT_TRUE(contains(import.output, "\n  middlebury ") && contains(import.output, "\n  rgbd ")) << import.output;
+}
+
+TEST(CliErrors, BadArgumentsAreRefusedOnStderrNamingTheOption) {
+  const std::string out = test::temp_dir("cli_errors") + "/run";
+  struct Case {
+    std::string args, named;
+  };
+  for (const auto& c : {
+           Case{"train --steps abc --out " + out, "--steps"},       // not a number: refused by CLI11
+           Case{"train --steps=abc --out " + out, "--steps"},       // the same in the --opt=value form
+           Case{"train --steps 1.5 --out " + out, "--steps"},       // a number, but not an integer
+           Case{"train --frobnicate 3 --out " + out, "--frobnicate"},  // unknown option
+           Case{"bench --runs", "--runs"},                          // missing value
+           Case{"render --cloud a.ply", "--out"},                   // missing required option
+           Case{"fuse --depth d --out o.ply --min-views many", "--min-views"},  // numeric default (FusionConfig)
+       }) {
+    const Result r = run_umvs(c.args, kOnlyStderr);
+    EXPECT_EQ(r.status, 2) << c.args << ": " << r.output;
+    EXPECT_TRUE(contains(r.output, c.named)) << c.args << ": " << r.output;
+    EXPECT_TRUE(contains(r.output, "error")) << c.args << ": " << r.output;
+  }
+  EXPECT_FALSE(fs::exists(out)) << "a refused call created its output folder";
+}
+
+TEST(CliJson, BenchPrintsOneJsonObjectThatParses) {
+  const Result r =
+      run_umvs("bench --case fusion --width=32 --height 24 --sources 1 --runs 2 --warmup 0 --threads 1 --json", kOnlyStdout);
+  ASSERT_EQ(r.status, 0) << r.output;
+  const auto j = nlohmann::json::parse(r.output);
+  EXPECT_EQ(j.at("case"), "fusion");
+  EXPECT_EQ(j.at("width"), 32);
+  EXPECT_EQ(j.at("height"), 24);
+  EXPECT_EQ(j.at("sources"), 1);
+  EXPECT_EQ(j.at("runs"), 2);
+  EXPECT_TRUE(j.at("points").is_number_unsigned()) << j;
+  const double median = j.at("median_s_per_view"), lo = j.at("min_s"), hi = j.at("max_s");
+  EXPECT_GT(lo, 0.0);
+  EXPECT_LE(lo, median);
+  EXPECT_LE(median, hi);
+  for (const char* stage : {"ranking", "consistency", "points"}) EXPECT_GE(j.at("stages_median_s_per_view").at(stage), 0.0);
+}
+
+TEST(CliJson, EvalDepthPrintsNullForMetricsWithoutPixels) {
+  const std::string gt = test::scene("cli_json_gt");
+  const std::string est = test::temp_dir("cli_json_est");
+  fs::create_directories(est + "/depth");
+  const auto gt_depth = read_pfm(gt + "/depth_gt/00000000.pfm");
+  write_pfm(est + "/depth/00000000.pfm", torch::zeros_like(gt_depth));  // no estimate anywhere
+  write_pfm(est + "/depth/00000001.pfm", read_pfm(gt + "/depth_gt/00000001.pfm"));  // exact
+  const Result r = run_umvs("eval depth --est " + est + " --gt " + gt + " --json", kOnlyStdout);
+  ASSERT_EQ(r.status, 0) << r.output;
+  const auto j = nlohmann::json::parse(r.output);
+  ASSERT_EQ(j.at("views").size(), 2u);
+  const auto& empty = j["views"][0];
+  EXPECT_EQ(empty.at("view"), 0);
+  EXPECT_EQ(empty.at("evaluated_pixels"), 0);
+  EXPECT_TRUE(empty.at("mae").is_null()) << empty;  // NaN is not JSON
+  EXPECT_TRUE(empty.at("rmse").is_null()) << empty;
+  const auto& exact = j["views"][1];
+  EXPECT_EQ(exact.at("evaluated_pixels"), exact.at("gt_pixels"));
+  EXPECT_EQ(exact.at("mae"), 0.0);
+  EXPECT_EQ(j.at("rel_thresholds"), nlohmann::json({0.01, 0.03}));
+  EXPECT_EQ(j.at("overall").at("evaluated_pixels"), exact.at("gt_pixels"));
+}
+
+}  // namespace
+}  // namespace umvs
