@@ -65,8 +65,15 @@ PointCloud read_pcd(const std::string& path) {
   pcl::PCLPointCloud2 blob;
   Eigen::Vector4f origin;
   Eigen::Quaternionf orientation;
-  int version = 0;
-  if (pcl::PCDReader().read(path, blob, origin, orientation, version) < 0) {
+  int version = 0, data_type = 0;
+  unsigned int data_start = 0;
+  pcl::PCDReader reader;
+  // PCL 1.13's read() crashes on a file whose header has no fields or points: check the header first.
+  if (reader.readHeader(path, blob, origin, orientation, version, data_type, data_start) < 0 || blob.fields.empty()) {
+    throw std::runtime_error("'" + path + "': not a PCD file (no readable header with FIELDS)");
+  }
+  if (uint64_t{blob.width} * blob.height == 0) return PointCloud();
+  if (reader.read(path, blob, origin, orientation, version) < 0) {
     throw std::runtime_error("'" + path + "': not a readable PCD file");
   }
   const uint64_t n = uint64_t{blob.width} * blob.height;

@@ -1,6 +1,9 @@
 #include "unsup_mvs/io/cloud_filter.h"
 
+#include <array>
 #include <chrono>
+#include <cmath>
+#include <map>
 #include <stdexcept>
 
 #ifdef UMVS_HAVE_PCL
@@ -52,6 +55,35 @@ PointCloud select(const PointCloud& cloud, const pcl::Indices& kept) {
   return out;
 }
 
+// pcl::VoxelGrid averages only the fields PCL knows (xyz, rgb, normals, ...) and leaves ours at
+// zero: average confidence and views of the input points of each output voxel here. A voxel is
+// found by its cell index, computed as VoxelGrid does (floor(coordinate * 1 / leaf)); a centroid
+// lies in its points' cell.
+void average_fields_per_voxel(const pcl::PointCloud<FusedPoint>& input, float leaf, pcl::PointCloud<FusedPoint>& out) {
+  const float inverse = 1.0f / leaf;
+  auto cell = [&](const FusedPoint& p) {
+    return std::array<int64_t, 3>{static_cast<int64_t>(std::floor(p.x * inverse)),
+                                  static_cast<int64_t>(std::floor(p.y * inverse)),
+                                  static_cast<int64_t>(std::floor(p.z * inverse))};
+  };
+  std::map<std::array<int64_t, 3>, size_t> voxel_of_cell;
+  for (size_t k = 0; k < out.size(); ++k) voxel_of_cell.emplace(cell(out[k]), k);
+  std::vector<double> confidence(out.size(), 0.0), views(out.size(), 0.0);
+  std::vector<int> count(out.size(), 0);
+  for (const FusedPoint& p : input) {
+    const auto it = voxel_of_cell.find(cell(p));
+    if (it == voxel_of_cell.end()) continue;  // a point on a cell border rounded the other way
+    confidence[it->second] += p.confidence;
+    views[it->second] += p.views;
+    ++count[it->second];
+  }
+  for (size_t k = 0; k < out.size(); ++k) {
+    if (count[k] == 0) continue;
+    out[k].confidence = static_cast<float>(confidence[k] / count[k]);
+    out[k].views = static_cast<std::uint8_t>(std::lround(views[k] / count[k]));
+  }
+}
+
 }  // namespace
 
 PointCloud filter_cloud(const PointCloud& cloud, const CloudFilterConfig& config, std::vector<CloudFilterStep>* steps) {
@@ -98,7 +130,8 @@ PointCloud filter_cloud(const PointCloud& cloud, const CloudFilterConfig& config
       const float leaf = static_cast<float>(config.voxel_leaf);
       grid.setLeafSize(leaf, leaf, leaf);
       pcl::PointCloud<FusedPoint> out;
-      grid.filter(out);
+      grid.filter(out);  // centroids and mean colours
+      average_fields_per_voxel(*input, leaf, out);
       return from_pcl(out, c.colors.size() == c.size(), c.confidence.size() == c.size(), c.num_views.size() == c.size());
     });
   }
