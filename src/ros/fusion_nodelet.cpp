@@ -1,12 +1,13 @@
-// fusion: DepthEstimate stream -> core::StreamingFusion -> PointCloud2 (xyz + rgb in the world
-// frame). `cloud` carries the whole (bounded) map at ~publish_rate Hz, `cloud_increment` the
-// points each depth estimate adds, as soon as they exist. save_cloud writes only inside ~save_dir.
+// fusion: DepthEstimate stream -> core::StreamingFusion -> PointCloud2 (x y z rgb confidence views
+// in the world frame, built with PCL). `cloud` carries the whole (bounded) map at ~publish_rate Hz,
+// after the optional ~filter/ stages, `cloud_increment` the points each depth estimate adds, as
+// soon as they exist. save_cloud writes .ply or .pcd (by extension) only inside ~save_dir.
 // See docs/ros.md.
 #include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
 #include <ros/ros.h>
+#include <pcl_conversions/pcl_conversions.h>
 #include <sensor_msgs/PointCloud2.h>
-#include <sensor_msgs/point_cloud2_iterator.h>
 #include <torch/torch.h>
 
 #include <boost/make_shared.hpp>
@@ -18,9 +19,11 @@
 #include "unsup_mvs/core/device.h"
 #include "unsup_mvs/core/fusion.h"
 #include "unsup_mvs/io/atomic_file.h"
-#include "unsup_mvs/io/ros/ros_conversions.h"
+#include "unsup_mvs/io/cloud_file.h"
+#include "unsup_mvs/io/cloud_filter.h"
 #include "unsup_mvs/io/file_safety.h"
-#include "unsup_mvs/io/ply.h"
+#include "unsup_mvs/io/pcl_cloud.h"
+#include "unsup_mvs/io/ros/ros_conversions.h"
 #include "unsup_mvs/ros/nodelets.h"
 #include "unsup_mvs/ros/params.h"
 
@@ -28,27 +31,15 @@ namespace umvs_ros {
 
 namespace {
 
+// The cloud as PCL's FusedPoint (x y z rgb confidence views, io/pcl_cloud.h) through pcl_conversions,
+// so that pcl_ros and pcl::fromROSMsg users read it directly.
 sensor_msgs::PointCloud2 to_cloud_msg(const umvs::PointCloud& cloud, const std::string& frame, const ros::Time& stamp) {
   sensor_msgs::PointCloud2 msg;
+  pcl::toROSMsg(umvs::to_pcl(cloud), msg);
+  // Set after the conversion: PCL's header keeps microseconds only, and subscribers match the
+  // stamp of the newest fused estimate exactly.
   msg.header.frame_id = frame;
   msg.header.stamp = stamp;
-  sensor_msgs::PointCloud2Modifier modifier(msg);
-  modifier.setPointCloud2FieldsByString(2, "xyz", "rgb");
-  modifier.resize(cloud.size());
-  msg.height = 1;
-  msg.width = static_cast<uint32_t>(cloud.size());
-  msg.is_dense = true;
-  sensor_msgs::PointCloud2Iterator<float> x(msg, "x"), y(msg, "y"), z(msg, "z");
-  sensor_msgs::PointCloud2Iterator<uint8_t> r(msg, "r"), g(msg, "g"), b(msg, "b");
-  for (size_t i = 0; i < cloud.size(); ++i, ++x, ++y, ++z, ++r, ++g, ++b) {
-    *x = cloud.points[i].x();
-    *y = cloud.points[i].y();
-    *z = cloud.points[i].z();
-    const std::array<uint8_t, 3> c = cloud.has_colors() ? cloud.colors[i] : std::array<uint8_t, 3>{200, 200, 200};
-    *r = c[0];
-    *g = c[1];
-    *b = c[2];
-  }
   return msg;
 }
 
@@ -67,6 +58,7 @@ class FusionNodelet : public nodelet::Nodelet {
       save_dir_ = c.save_dir;
       default_save_path_ = c.default_save_path;
       max_image_pixels_ = c.max_image_pixels;
+      filters_ = c.filters;
       umvs::make_directories(save_dir_);
       fusion_ = std::make_unique<umvs::StreamingFusion>(c.fusion, c.window, static_cast<size_t>(c.max_points),
                                                         umvs::parse_device(c.device));
@@ -86,6 +78,12 @@ class FusionNodelet : public nodelet::Nodelet {
                  "into %s",
                  node.window, node.max_points, c.voxel_size, c.min_agreeing_views, c.max_reprojection_px,
                  100 * c.max_relative_depth, c.min_confidence, node.publish_rate, world_frame_.c_str(), save_dir_.c_str());
+    if (filters_.any()) {
+      NODELET_INFO("fusion: map filtered before publishing/saving: statistical mean_k %d (std x %.2f), radius %.4f m "
+                   "(>= %d neighbours), voxel leaf %.4f m (0 = off)",
+                   filters_.sor_mean_k, filters_.sor_std_mul, filters_.radius, filters_.radius_min_neighbors,
+                   filters_.voxel_leaf);
+    }
   }
 
   void onEstimate(const unsup_mvs::DepthEstimateConstPtr& msg) {
@@ -131,10 +129,26 @@ class FusionNodelet : public nodelet::Nodelet {
   }
 
   void onTimer(const ros::WallTimerEvent&) {
-    std::lock_guard<std::mutex> lock(mutex_);
-    if (!dirty_) return;
-    cloud_pub_.publish(to_cloud_msg(fusion_->cloud(), world_frame_, last_stamp_));
-    dirty_ = false;
+    umvs::PointCloud map;
+    ros::Time stamp;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (!dirty_) return;
+      map = fusion_->cloud();
+      stamp = last_stamp_;
+      dirty_ = false;
+    }
+    // Filtered outside the lock: estimates keep being fused meanwhile.
+    try {
+      cloud_pub_.publish(to_cloud_msg(filtered(map), world_frame_, stamp));
+    } catch (const std::exception& e) {
+      NODELET_ERROR_THROTTLE(2.0, "fusion: map not published: %s", e.what());
+    }
+  }
+
+  // The map as published and saved: after the ~filter/ stages, if any.
+  umvs::PointCloud filtered(const umvs::PointCloud& map) const {
+    return filters_.any() ? umvs::filter_cloud(map, filters_) : map;
   }
 
   bool onSave(unsup_mvs::SaveCloud::Request& req, unsup_mvs::SaveCloud::Response& res) {
@@ -146,6 +160,14 @@ class FusionNodelet : public nodelet::Nodelet {
     } catch (const std::exception& e) {
       res.success = false;
       res.message = std::string("refused: ") + e.what() + " (~save_dir); nothing written";
+      NODELET_ERROR("fusion: save_cloud %s", res.message.c_str());
+      return true;
+    }
+    try {
+      umvs::cloud_file_format(path);  // .ply or .pcd, checked before anything is touched
+    } catch (const std::exception& e) {
+      res.success = false;
+      res.message = std::string("refused: ") + e.what() + "; nothing written";
       NODELET_ERROR("fusion: save_cloud %s", res.message.c_str());
       return true;
     }
@@ -162,7 +184,9 @@ class FusionNodelet : public nodelet::Nodelet {
       return true;
     }
     try {
-      umvs::write_ply(path, copy);
+      copy = filtered(copy);
+      res.num_points = copy.size();
+      umvs::write_cloud(path, copy);
       res.success = true;
       res.message = "wrote " + std::to_string(copy.size()) + " points to " + path;
       NODELET_INFO("fusion: %s", res.message.c_str());
@@ -190,6 +214,7 @@ class FusionNodelet : public nodelet::Nodelet {
   // Depth maps are a quarter of the network input; 2048 x 2048 keeps the window (about 21 bytes per
   // pixel per estimate, docs/fusion.md) under 1 GB at the default window of 8.
   int max_image_pixels_ = FusionNodeConfig{}.max_image_pixels;
+  umvs::CloudFilterConfig filters_;
   std::mutex mutex_;
   std::unique_ptr<umvs::StreamingFusion> fusion_;
   long estimates_ = 0;

@@ -8,6 +8,7 @@
 #include <stdexcept>
 
 #include "unsup_mvs/core/device.h"
+#include "unsup_mvs/io/cloud_file.h"
 #include "unsup_mvs/ros/nodelets.h"
 
 namespace umvs_ros {
@@ -95,6 +96,16 @@ void FusionNodeConfig::validate() const {
   if (window < 1) throw std::invalid_argument("window must be >= 1");
   if (max_points < 1) throw std::invalid_argument("max_points must be >= 1");
   if (!(publish_rate > 0)) throw std::invalid_argument("publish_rate must be > 0");
+  try {
+    umvs::cloud_file_format(default_save_path);  // save_cloud with an empty path must be able to write it
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(std::string("default_save_path: ") + e.what());
+  }
+  try {
+    filters.validate();
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(std::string("~filter/: ") + e.what());
+  }
 }
 
 FusionNodeConfig fusion_node_config_from_ros(const ros::NodeHandle& nh) {
@@ -109,6 +120,12 @@ FusionNodeConfig fusion_node_config_from_ros(const ros::NodeHandle& nh) {
   if (c.save_dir.empty()) c.save_dir = ros_home() + "/unsup_mvs_clouds";
   nh.param("default_save_path", c.default_save_path, c.default_save_path);
   nh.param("max_image_pixels", c.max_image_pixels, c.max_image_pixels);
+  const ros::NodeHandle filter(nh, "filter");
+  filter.param("sor_mean_k", c.filters.sor_mean_k, c.filters.sor_mean_k);
+  filter.param("sor_std_mul", c.filters.sor_std_mul, c.filters.sor_std_mul);
+  filter.param("radius", c.filters.radius, c.filters.radius);
+  filter.param("radius_min_neighbors", c.filters.radius_min_neighbors, c.filters.radius_min_neighbors);
+  filter.param("voxel_leaf", c.filters.voxel_leaf, c.filters.voxel_leaf);
   c.validate();
   return c;
 }

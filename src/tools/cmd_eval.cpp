@@ -12,9 +12,9 @@
 #include "unsup_mvs/core/device.h"
 #include "unsup_mvs/core/metrics.h"
 #include "unsup_mvs/io/array_io.h"
+#include "unsup_mvs/io/cloud_file.h"
 #include "unsup_mvs/io/inference_folder.h"
 #include "unsup_mvs/io/mvs_folder.h"
-#include "unsup_mvs/io/ply.h"
 #include "unsup_mvs/tools/args.h"
 #include "unsup_mvs/tools/command.h"
 
@@ -195,8 +195,8 @@ int eval_cloud(int argc, char** argv) {
                   "DTU-style accuracy (EST -> GT nearest-neighbour distance) and completeness (GT -> EST), mean and\n"
                   "median, distances above --max-dist left out as outliers; overall = mean of the two means.\n"
                   "Tanks-and-Temples precision, recall and F-score at each --thresholds distance. Distances in scene units.");
-  args.required("est", "estimated cloud (.ply)")
-      .required("gt", "ground-truth cloud (.ply), e.g. gt.ply of a `umvs synth` folder")
+  args.required("est", "estimated cloud (.ply or .pcd)")
+      .required("gt", "ground-truth cloud (.ply or .pcd), e.g. gt.ply of a `umvs synth` folder")
       .option("max-dist", "0", "outlier cap: distances above it are left out of the means (DTU: 0.02 m); 0 = none")
       .option("thresholds", "0.002,0.005,0.01", "precision/recall thresholds (comma-separated)")
       .option("downsample", "0", "first reduce both clouds to this minimum spacing (DTU: 0.0002 m); 0 = no")
@@ -207,8 +207,8 @@ int eval_cloud(int argc, char** argv) {
   cfg.max_distance = args.real("max-dist");
   cfg.thresholds = parse_reals(args, "thresholds");
   cfg.downsample_spacing = args.real("downsample");
-  const auto est = umvs::read_ply(args.str("est"));
-  const auto gt = umvs::read_ply(args.str("gt"));
+  const auto est = umvs::read_cloud(args.str("est"));
+  const auto gt = umvs::read_cloud(args.str("gt"));
   if (est.empty()) throw std::runtime_error("estimated cloud " + args.str("est") + " has no points: nothing to evaluate");
   if (gt.empty()) throw std::runtime_error("ground-truth cloud " + args.str("gt") + " has no points");
   const umvs::CloudMetrics m = umvs::evaluate_cloud(est, gt, cfg);

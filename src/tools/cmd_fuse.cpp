@@ -1,4 +1,5 @@
-// umvs fuse: depth maps of a scene -> one consistent coloured point cloud (binary PLY).
+// umvs fuse: depth maps of a scene -> one consistent coloured point cloud (binary PLY or PCD),
+// optionally cleaned by PCL filters (io/cloud_filter.h).
 #include <torch/torch.h>
 
 #include <chrono>
@@ -12,10 +13,11 @@
 #include "unsup_mvs/core/fusion.h"
 #include "unsup_mvs/core/image_ops.h"
 #include "unsup_mvs/io/array_io.h"
+#include "unsup_mvs/io/cloud_file.h"
+#include "unsup_mvs/io/cloud_filter.h"
 #include "unsup_mvs/io/image_io.h"
 #include "unsup_mvs/io/inference_folder.h"
 #include "unsup_mvs/io/mvs_folder.h"
-#include "unsup_mvs/io/ply.h"
 #include "unsup_mvs/tools/args.h"
 #include "unsup_mvs/tools/command.h"
 
@@ -90,19 +92,21 @@ std::vector<double> parse_bbox(const std::string& s) {
 
 }  // namespace
 
-UMVS_COMMAND(fuse, "fuse depth maps into one consistent point cloud (PLY)") {
+UMVS_COMMAND(fuse, "fuse depth maps into one consistent point cloud (PLY or PCD)") {
   const umvs::FusionConfig fusion_defaults;  // the thresholds' defaults are FusionConfig's
   umvs::Args args("fuse",
                   "Keeps the depth-map pixels that enough other views agree with (reprojection error and\n"
                   "relative depth difference after a round trip, see docs/fusion.md) and writes them as one\n"
-                  "binary PLY with colour, confidence and agreeing-view count.\n"
+                  "binary PLY or compressed PCD (by the extension of --out) with colour, confidence and\n"
+                  "agreeing-view count, optionally cleaned by PCL filters (off by default; in this order:\n"
+                  "--sor-k, --radius, --voxel-grid).\n"
                   "--depth is either a folder written by `umvs infer` (depth_est/, confidence/, cams/,\n"
                   "images/, pair.txt: --data is then optional) or a folder of XXXXXXXX.pfm depth maps such as\n"
                   "DATA/depth_gt (cameras, images and pair.txt then come from --data; cameras are rescaled\n"
                   "when the depth maps are smaller than the images).");
   args.required("depth", "depth folder: `umvs infer` output or a folder of XXXXXXXX.pfm")
       .option("data", "", "MVSNet-format folder for cams/images/pair.txt missing from --depth")
-      .required("out", "output PLY (written atomically; an existing file is kept when fusion fails)")
+      .required("out", "output cloud, .ply or .pcd (written atomically; an existing file is kept when fusion fails)")
       .option("min-confidence", fusion_defaults.min_confidence, "pixels below this confidence are ignored")
       .option("max-reprojection", fusion_defaults.max_reprojection_px,
               "max reprojection error after the round trip (pixels)")
@@ -116,6 +120,11 @@ UMVS_COMMAND(fuse, "fuse depth maps into one consistent point cloud (PLY)") {
       .option("ref", "", "comma-separated view ids to fuse (default: all in pair.txt with a depth map)")
       .flag("stream", "use the streaming fusion (views in pair.txt order, --window recent estimates)")
       .option("window", "10", "with --stream: estimates kept in the ring")
+      .option("sor-k", "0", "statistical outlier removal: neighbours per point (PCL mean-K; 0 = off)")
+      .option("sor-std", "2.0", "statistical outlier removal: drop points farther than mean + this many std devs")
+      .option("radius", "0", "radius outlier removal: search radius in scene units (0 = off)")
+      .option("radius-min", "2", "radius outlier removal: neighbours needed within --radius")
+      .option("voxel-grid", "0", "PCL voxel grid leaf in scene units: one averaged point per cube (0 = off)")
       .option("bbox", "", "xmin,ymin,zmin,xmax,ymax,zmax: also report the share of points inside")
       .option("device", "cpu", "cpu | cuda | cuda:N")
       .option("threads", "0", "CPU threads (0 = all cores)");
@@ -131,6 +140,14 @@ UMVS_COMMAND(fuse, "fuse depth maps into one consistent point cloud (PLY)") {
   cfg.voxel_size = args.real("voxel");
   cfg.source_rule = umvs::fusion_source_rule_from_string(args.str("source-rule"));
   cfg.validate();
+  umvs::CloudFilterConfig filters;
+  filters.sor_mean_k = args.integer("sor-k");
+  filters.sor_std_mul = args.real("sor-std");
+  filters.radius = args.real("radius");
+  filters.radius_min_neighbors = args.integer("radius-min");
+  filters.voxel_leaf = args.real("voxel-grid");
+  filters.validate();
+  umvs::cloud_file_format(args.str("out"));  // a wrong extension is refused before any work
   const auto bbox = args.given("bbox") ? parse_bbox(args.str("bbox")) : std::vector<double>{};
 
   const Layout layout = find_layout(args.str("depth"), args.str("data"));
@@ -187,20 +204,30 @@ UMVS_COMMAND(fuse, "fuse depth maps into one consistent point cloud (PLY)") {
   const double fuse_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   std::printf("fused %zu views into %zu points in %.2f s (%.3f s per view)\n", views.size(), cloud.size(), fuse_s,
               fuse_s / views.size());
-  if (!bbox.empty()) {
+  auto report_bbox = [&] {
+    if (bbox.empty()) return;
     size_t inside = 0;
     for (const auto& p : cloud.points) {
       inside += p.x() >= bbox[0] && p.y() >= bbox[1] && p.z() >= bbox[2] && p.x() <= bbox[3] && p.y() <= bbox[4] && p.z() <= bbox[5];
     }
     std::printf("inside the bounding box: %zu of %zu points (%.1f%%)\n", inside, cloud.size(),
                 cloud.empty() ? 0.0 : 100.0 * inside / cloud.size());
+  };
+  report_bbox();
+  if (filters.any()) {
+    std::vector<umvs::CloudFilterStep> steps;
+    cloud = umvs::filter_cloud(cloud, filters, &steps);
+    for (const auto& s : steps) {
+      std::printf("filter %s: %zu -> %zu points in %.3f s\n", s.name.c_str(), s.points_before, s.points_after, s.seconds);
+    }
+    report_bbox();  // the last line is the written cloud's
   }
   if (cloud.empty()) {
     std::cerr << "no point survived the consistency test: nothing written (loosen --min-views, --min-confidence, "
                  "--max-reprojection or --max-relative-depth)\n";
     return 1;
   }
-  umvs::write_ply(args.str("out"), cloud);
+  umvs::write_cloud(args.str("out"), cloud);
   std::printf("wrote %s\n", args.str("out").c_str());
   return 0;
 }

@@ -5,10 +5,10 @@
 #include <utility>
 
 #include "unsup_mvs/core/render_points.h"
+#include "unsup_mvs/io/cloud_file.h"
 #include "unsup_mvs/io/image_io.h"
 #include "unsup_mvs/io/inference_folder.h"
 #include "unsup_mvs/io/mvs_folder.h"
-#include "unsup_mvs/io/ply.h"
 #include "unsup_mvs/tools/args.h"
 #include "unsup_mvs/tools/command.h"
 
@@ -50,12 +50,12 @@ void check_principal_point(const umvs::Camera& cam, int width, int height) {
 
 }  // namespace
 
-UMVS_COMMAND(render, "render a point cloud (PLY) to a PNG picture") {
+UMVS_COMMAND(render, "render a point cloud (PLY or PCD) to a PNG picture") {
   umvs::Args args("render",
-                  "Splats the points of a PLY into a picture, seen either from an MVSNet cam file (--cam; the\n"
+                  "Splats the points of a cloud into a picture, seen either from an MVSNet cam file (--cam; the\n"
                   "picture has the size of the view's image in the same folder, DIR/images/ID.*, unless\n"
                   "--width/--height say otherwise) or from an orbit around the cloud's centre.");
-  args.required("cloud", "input PLY")
+  args.required("cloud", "input cloud (.ply or .pcd)")
       .required("out", "output PNG")
       .option("cam", "", "MVSNet cam file to look through (default: orbit view)")
       .option("width", "640", "picture width (with --cam: the width of the image the cam file describes, "
@@ -68,7 +68,7 @@ UMVS_COMMAND(render, "render a point cloud (PLY) to a PNG picture") {
       .option("fov", "40", "orbit: horizontal field of view, degrees")
       .option("splat", "1", "splat radius in pixels");
   if (!args.parse(argc, argv)) return 0;
-  const auto cloud = umvs::read_ply(args.str("cloud"));
+  const auto cloud = umvs::read_cloud(args.str("cloud"));
   if (cloud.empty()) throw std::runtime_error(args.str("cloud") + " has no points");
   umvs::Camera cam;
   int W = args.integer("width"), H = args.integer("height");

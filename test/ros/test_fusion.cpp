@@ -1,7 +1,9 @@
 // rostest for the fusion node: depth estimates of a plane seen by cameras moving along x become a
-// PointCloud2 on the plane (frame, stamp, fields checked); save_cloud writes a PLY with the same
-// points and never replaces a good file with nothing; reset clears; bad estimates (another world
-// frame, NaN pose, wrong depth encoding) are logged and skipped.
+// PointCloud2 on the plane (frame, stamp, PCL fields checked); save_cloud writes a PLY and a PCD
+// that PCL opens, with the same points, refuses other extensions and never replaces a good file
+// with nothing; reset clears; bad estimates (another world frame, NaN pose, wrong depth encoding)
+// are logged and skipped.
+#include <pcl/io/pcd_io.h>
 #include <sensor_msgs/PointCloud2.h>
 #include <sensor_msgs/point_cloud2_iterator.h>
 #include <torch/torch.h>
@@ -13,8 +15,9 @@
 #include "unsup_mvs/DepthEstimate.h"
 #include "unsup_mvs/ResetFusion.h"
 #include "unsup_mvs/SaveCloud.h"
-#include "unsup_mvs/io/ros/ros_conversions.h"
+#include "unsup_mvs/io/pcl_cloud.h"
 #include "unsup_mvs/io/ply.h"
+#include "unsup_mvs/io/ros/ros_conversions.h"
 
 namespace {
 
@@ -97,16 +100,18 @@ TEST_F(FusionTest, PlaneBecomesACloudAndIsSaved) {
   EXPECT_EQ(increment_points_, c.width * c.height) << "the increments add up to the map";
   std::vector<std::string> names;
   for (const auto& f : c.fields) names.push_back(f.name);
-  EXPECT_EQ(names, (std::vector<std::string>{"x", "y", "z", "rgb"}));
-  sensor_msgs::PointCloud2ConstIterator<float> x(c, "x"), y(c, "y"), z(c, "z");
-  sensor_msgs::PointCloud2ConstIterator<uint8_t> r(c, "r"), g(c, "g");
+  EXPECT_EQ(names, (std::vector<std::string>{"x", "y", "z", "rgb", "confidence", "views"}));
+  sensor_msgs::PointCloud2ConstIterator<float> x(c, "x"), y(c, "y"), z(c, "z"), conf(c, "confidence");
+  sensor_msgs::PointCloud2ConstIterator<uint8_t> r(c, "r"), g(c, "g"), views(c, "views");
   // Every camera sees x in [cx - 1.9, cx + 1.9], y in [-1.4, 1.4] on the plane (3 m * 31.5 / 50).
-  for (size_t i = 0; i < c.width * c.height; ++i, ++x, ++y, ++z, ++r, ++g) {
+  for (size_t i = 0; i < c.width * c.height; ++i, ++x, ++y, ++z, ++r, ++g, ++conf, ++views) {
     ASSERT_NEAR(*z, kPlaneZ, 1e-3);
     ASSERT_TRUE(*x > -2.0f && *x < 2.4f) << *x;
     ASSERT_TRUE(std::abs(*y) < 1.5f) << *y;
     ASSERT_EQ(*r, 200);
     ASSERT_EQ(*g, 0);
+    ASSERT_NEAR(*conf, 0.9f, 1e-5);  // every pixel's confidence
+    ASSERT_GE(*views, 2);            // min_agreeing_views
   }
 
   const std::string path = dir_ + "/cloud.ply";
@@ -116,6 +121,30 @@ TEST_F(FusionTest, PlaneBecomesACloudAndIsSaved) {
   const umvs::PointCloud saved = umvs::read_ply(path);
   ASSERT_EQ(saved.size(), res.num_points);
   for (const auto& p : saved.points) ASSERT_NEAR(p.z(), kPlaneZ, 1e-3);
+
+  // The same map as a PCD that PCL opens: every point, with our fields.
+  res = save(dir_ + "/cloud.pcd");
+  ASSERT_TRUE(res.success) << res.message;
+  EXPECT_EQ(res.num_points, c.width * c.height);
+  pcl::PCLPointCloud2 blob;
+  ASSERT_EQ(pcl::io::loadPCDFile(dir_ + "/cloud.pcd", blob), 0);
+  std::vector<std::string> pcd_fields;
+  for (const auto& f : blob.fields) pcd_fields.push_back(f.name);
+  EXPECT_EQ(pcd_fields, names);
+  pcl::PointCloud<umvs::FusedPoint> pcd;
+  ASSERT_EQ(pcl::io::loadPCDFile(dir_ + "/cloud.pcd", pcd), 0);
+  ASSERT_EQ(pcd.size(), c.width * c.height);
+  for (const auto& p : pcd) {
+    ASSERT_NEAR(p.z, kPlaneZ, 1e-3);
+    ASSERT_EQ(p.r, 200);
+    ASSERT_GE(p.views, 2);
+  }
+
+  // Another extension is refused with its name, and nothing is written.
+  res = save(dir_ + "/cloud.txt");
+  EXPECT_FALSE(res.success);
+  EXPECT_NE(res.message.find("'.txt'"), std::string::npos) << res.message;
+  EXPECT_FALSE(std::filesystem::exists(dir_ + "/cloud.txt"));
 
   // A path that cannot be written (its folder would be inside a regular file): a clear failure.
   res = save(path + "/cloud.ply");

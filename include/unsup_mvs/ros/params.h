@@ -10,6 +10,7 @@
 #include "unsup_mvs/core/depth_estimator.h"
 #include "unsup_mvs/core/fusion.h"
 #include "unsup_mvs/core/keyframes.h"
+#include "unsup_mvs/io/cloud_filter.h"
 #include "unsup_mvs/io/fine_tune_job.h"
 
 namespace umvs_ros {
@@ -56,6 +57,7 @@ struct FusionNodeConfig {
   std::string save_dir;           // "" = $ROS_HOME/unsup_mvs_clouds
   std::string default_save_path = "unsup_mvs_cloud.ply";
   int max_image_pixels = 2048 * 2048;
+  umvs::CloudFilterConfig filters;  // ~filter/: applied to the published and saved map (all off by default)
   void validate() const;
 };
 FusionNodeConfig fusion_node_config_from_ros(const ros::NodeHandle& nh);
