@@ -140,9 +140,10 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
   void onReconfigure(const unsup_mvs::KeyframeSelectorConfig& request) {
     const umvs::KeyframeStreamConfig next = with_reconfigure(stream_, request);
     next.validate();
-    auto tracker = next.depth_min != stream_.depth_min || next.depth_max != stream_.depth_max
-                       ? std::make_unique<umvs::DepthRangeTracker>(next.depth_min, next.depth_max)
-                       : nullptr;
+    std::unique_ptr<umvs::DepthRangeTracker> tracker;
+    if (next.depth_min != stream_.depth_min || next.depth_max != stream_.depth_max) {
+      tracker = std::make_unique<umvs::DepthRangeTracker>(next.depth_min, next.depth_max);
+    }
     std::lock_guard<std::mutex> lock(mutex_);
     for (const int64_t id : buffer_->set_config(next.keyframes)) frames_by_id_.erase(id);
     if (tracker) depth_range_ = std::move(tracker);
