@@ -358,6 +358,49 @@ TEST(StreamingFusion, BadViewLeavesStateUnchanged) {
   EXPECT_EQ(stream.cloud().size(), n);
 }
 
+TEST(StreamingFusion, NewThresholdsApplyFromTheNextView) {
+  auto views = ring_views(8);
+  FusionConfig cfg;  // 3 agreeing views
+  StreamingFusion stream(cfg, 8, 1000000, torch::kCPU);
+  for (int i = 0; i < 3; ++i) EXPECT_EQ(stream.add(views[i]).size(), 0u);
+
+  // Invalid: refused, nothing changed.
+  FusionConfig bad = cfg;
+  bad.max_reprojection_px = 0;
+  EXPECT_THROW(stream.set_config(bad), std::invalid_argument);
+  EXPECT_DOUBLE_EQ(stream.config().max_reprojection_px, cfg.max_reprojection_px);
+
+  // A stricter rule: the fourth view, which confirms the shared pixels at 3 views, adds nothing.
+  FusionConfig strict = cfg;
+  strict.min_agreeing_views = 5;
+  stream.set_config(strict);
+  EXPECT_EQ(stream.config().min_agreeing_views, 5);
+  EXPECT_EQ(stream.add(views[3]).size(), 0u);
+  // Back to 3: the next view emits the pixels the four stored ones already agree on, and more.
+  stream.set_config(cfg);
+  EXPECT_GT(stream.add(views[4]).size(), 1000u);
+  expect_accurate(to_tensor(stream.cloud()));
+
+  // A voxel grid from now on: the next view adds only points in voxels not yet taken, and fewer
+  // than the same stream without the grid adds.
+  StreamingFusion plain(cfg, 8, 1000000, torch::kCPU);
+  for (int i = 0; i < 5; ++i) plain.add(views[i]);
+  FusionConfig voxels = cfg;
+  voxels.voxel_size = 0.03;
+  stream.set_config(voxels);
+  std::set<std::tuple<int64_t, int64_t, int64_t>> taken;
+  auto cell = [](const Eigen::Vector3f& p) {
+    return std::make_tuple(int64_t(std::floor(p.x() / 0.03)), int64_t(std::floor(p.y() / 0.03)),
+                           int64_t(std::floor(p.z() / 0.03)));
+  };
+  for (const auto& p : stream.cloud().points) taken.insert(cell(p));
+  const PointCloud without_grid = plain.add(views[5]);
+  const PointCloud with_grid = stream.add(views[5]);
+  ASSERT_GT(without_grid.size(), 100u);
+  EXPECT_LT(with_grid.size(), without_grid.size());
+  for (const auto& p : with_grid.points) EXPECT_TRUE(taken.insert(cell(p)).second);
+}
+
 TEST(DepthFusion, PerPixelLoopMatchesTensorOps) {
   // The CPU loop (check_consistency) and the torch-op version used on CUDA, on noisy depth with
   // holes and mixed confidence, for both source rules.

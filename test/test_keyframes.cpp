@@ -80,6 +80,30 @@ TEST(Keyframes, BufferIsBoundedAndEvictsTheOldest) {
   EXPECT_DOUBLE_EQ(buffer.find(5)->stamp, 5.0);
 }
 
+TEST(Keyframes, NewPolicyAppliesToTheNextFrame) {
+  KeyframeConfig cfg;
+  cfg.min_translation = 0.1;
+  cfg.buffer_size = 6;
+  KeyframeBuffer buffer(cfg);
+  for (int i = 0; i < 5; ++i) buffer.add(camera_at({0.2 * i, 0, 0}), i);
+  EXPECT_TRUE(buffer.is_keyframe(camera_at({0.95, 0, 0})));
+
+  KeyframeConfig bad = cfg;
+  bad.buffer_size = bad.num_sources;  // needs num_sources + 1
+  EXPECT_THROW(buffer.set_config(bad), std::invalid_argument);
+  EXPECT_EQ(buffer.config().buffer_size, 6);
+  EXPECT_EQ(buffer.keyframes().size(), 5u);
+
+  KeyframeConfig wider = cfg;
+  wider.min_translation = 0.3;
+  wider.buffer_size = 3;
+  EXPECT_EQ(buffer.set_config(wider), (std::vector<int64_t>{0, 1}));  // the oldest go
+  EXPECT_EQ(buffer.keyframes().size(), 3u);
+  EXPECT_EQ(buffer.keyframes().front().id, 2);
+  EXPECT_FALSE(buffer.is_keyframe(camera_at({0.95, 0, 0})));  // 0.15 m from the last one now too little
+  EXPECT_TRUE(buffer.is_keyframe(camera_at({1.2, 0, 0})));
+}
+
 TEST(Keyframes, NeighboursAreTheBestTriangulatingViews) {
   // Reference at the origin looking at a surface 2 m away. The view-selection score peaks at a
   // 5 degree triangulation angle: a baseline of ~0.175 m at 2 m. Candidates: 0.02 m (angle too

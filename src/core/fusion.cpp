@@ -600,10 +600,20 @@ void StreamingFusion::append_points(PointCloud& points) {
   erase_front(cloud_.colors);
   erase_front(cloud_.confidence);
   erase_front(cloud_.num_views);
-  if (config_.voxel_size > 0) {
-    voxels_.clear();
-    for (const auto& p : cloud_.points) voxels_.insert(voxel_key(p, config_.voxel_size));
-  }
+  if (config_.voxel_size > 0) rebuild_voxel_index();
+}
+
+void StreamingFusion::rebuild_voxel_index() {
+  voxels_.clear();
+  if (config_.voxel_size <= 0) return;
+  for (const auto& p : cloud_.points) voxels_.insert(voxel_key(p, config_.voxel_size));
+}
+
+void StreamingFusion::set_config(const FusionConfig& config) {
+  config.validate();
+  const bool new_voxels = config.voxel_size != config_.voxel_size;
+  config_ = config;
+  if (new_voxels) rebuild_voxel_index();
 }
 
 }  // namespace umvs

@@ -97,6 +97,17 @@ std::vector<KeyframeScore> KeyframeBuffer::select_sources(int64_t reference_id,
   return best;
 }
 
+std::vector<int64_t> KeyframeBuffer::set_config(const KeyframeConfig& config) {
+  config.validate();
+  config_ = config;
+  std::vector<int64_t> evicted;
+  while (static_cast<int>(keyframes_.size()) > config_.buffer_size) {
+    evicted.push_back(keyframes_.front().id);
+    keyframes_.pop_front();
+  }
+  return evicted;
+}
+
 void KeyframeBuffer::clear() {
   keyframes_.clear();
   next_id_ = 0;

@@ -2,7 +2,7 @@
 // in the world frame, built with PCL). `cloud` carries the whole (bounded) map at ~publish_rate Hz,
 // after the optional ~filter/ stages, `cloud_increment` the points each depth estimate adds, as
 // soon as they exist. save_cloud writes .ply or .pcd (by extension) only inside ~save_dir.
-// See docs/ros.md.
+// The thresholds can be tuned live (dynamic_reconfigure, cfg/Fusion.cfg). See docs/ros.md.
 #include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
 #include <ros/ros.h>
@@ -14,6 +14,7 @@
 #include <mutex>
 
 #include "unsup_mvs/DepthEstimate.h"
+#include "unsup_mvs/FusionConfig.h"
 #include "unsup_mvs/ResetFusion.h"
 #include "unsup_mvs/SaveCloud.h"
 #include "unsup_mvs/core/device.h"
@@ -26,6 +27,7 @@
 #include "unsup_mvs/io/ros/ros_conversions.h"
 #include "unsup_mvs/ros/nodelets.h"
 #include "unsup_mvs/ros/params.h"
+#include "unsup_mvs/ros/reconfigure.h"
 
 namespace umvs_ros {
 
@@ -43,6 +45,26 @@ sensor_msgs::PointCloud2 to_cloud_msg(const umvs::PointCloud& cloud, const std::
   return msg;
 }
 
+// The live-tunable thresholds (cfg/Fusion.cfg), both ways.
+unsup_mvs::FusionConfig to_reconfigure(const umvs::FusionConfig& c) {
+  unsup_mvs::FusionConfig r = unsup_mvs::FusionConfig::__getDefault__();
+  r.min_confidence = c.min_confidence;
+  r.max_reprojection_px = c.max_reprojection_px;
+  r.max_relative_depth = c.max_relative_depth;
+  r.min_agreeing_views = c.min_agreeing_views;
+  r.voxel_size = c.voxel_size;
+  return r;
+}
+
+umvs::FusionConfig with_reconfigure(umvs::FusionConfig c, const unsup_mvs::FusionConfig& r) {
+  c.min_confidence = r.min_confidence;
+  c.max_reprojection_px = r.max_reprojection_px;
+  c.max_relative_depth = r.max_relative_depth;
+  c.min_agreeing_views = r.min_agreeing_views;
+  c.voxel_size = r.voxel_size;
+  return c;
+}
+
 }  // namespace
 
 class FusionNodelet : public nodelet::Nodelet {
@@ -50,10 +72,9 @@ class FusionNodelet : public nodelet::Nodelet {
   void onInit() override {
     ros::NodeHandle& nh = getNodeHandle();
     ros::NodeHandle& pnh = getPrivateNodeHandle();
-    FusionNodeConfig node;
     try {
-      node = fusion_node_config_from_ros(pnh);
-      const FusionNodeConfig& c = node;
+      node_ = fusion_node_config_from_ros(pnh);
+      const FusionNodeConfig& c = node_;
       world_frame_ = c.world_frame;
       save_dir_ = c.save_dir;
       default_save_path_ = c.default_save_path;
@@ -71,19 +92,32 @@ class FusionNodelet : public nodelet::Nodelet {
     estimate_sub_ = nh.subscribe("depth_estimate", 5, &FusionNodelet::onEstimate, this);
     save_srv_ = pnh.advertiseService("save_cloud", &FusionNodelet::onSave, this);
     reset_srv_ = pnh.advertiseService("reset", &FusionNodelet::onReset, this);
-    timer_ = nh.createWallTimer(ros::WallDuration(1.0 / node.publish_rate), &FusionNodelet::onTimer, this);
-    const auto& c = fusion_->config();
+    timer_ = nh.createWallTimer(ros::WallDuration(1.0 / node_.publish_rate), &FusionNodelet::onTimer, this);
+    reconfigure_ = std::make_unique<ReconfigureServer<unsup_mvs::FusionConfig>>(
+        pnh, "fusion", to_reconfigure(node_.fusion), [this](const unsup_mvs::FusionConfig& r) { onReconfigure(r); });
+    const auto& c = node_.fusion;
     NODELET_INFO("fusion: window %d, at most %d points, voxel %.3f m, a point needs %d agreeing views "
                  "(%.1f px, %.1f%% depth, confidence >= %.2f), map published at %.1f Hz in '%s', clouds saved "
                  "into %s",
-                 node.window, node.max_points, c.voxel_size, c.min_agreeing_views, c.max_reprojection_px,
-                 100 * c.max_relative_depth, c.min_confidence, node.publish_rate, world_frame_.c_str(), save_dir_.c_str());
+                 node_.window, node_.max_points, c.voxel_size, c.min_agreeing_views, c.max_reprojection_px,
+                 100 * c.max_relative_depth, c.min_confidence, node_.publish_rate, world_frame_.c_str(), save_dir_.c_str());
     if (filters_.any()) {
       NODELET_INFO("fusion: map filtered before publishing/saving: statistical mean_k %d (std x %.2f), radius %.4f m "
                    "(>= %d neighbours), voxel leaf %.4f m (0 = off)",
                    filters_.sor_mean_k, filters_.sor_std_mul, filters_.radius, filters_.radius_min_neighbors,
                    filters_.voxel_leaf);
     }
+  }
+
+  // New thresholds from dynamic_reconfigure: checked as at start-up, used from the next estimate.
+  // Throws std::invalid_argument (naming the parameter) and changes nothing when they are invalid.
+  void onReconfigure(const unsup_mvs::FusionConfig& request) {
+    FusionNodeConfig next = node_;
+    next.fusion = with_reconfigure(node_.fusion, request);
+    next.validate();
+    std::lock_guard<std::mutex> lock(mutex_);
+    fusion_->set_config(next.fusion);
+    node_ = next;
   }
 
   void onEstimate(const unsup_mvs::DepthEstimateConstPtr& msg) {
@@ -210,6 +244,7 @@ class FusionNodelet : public nodelet::Nodelet {
     return true;
   }
 
+  FusionNodeConfig node_;  // as started, then as reconfigured (changed only by onReconfigure)
   std::string world_frame_, save_dir_, default_save_path_;
   // Depth maps are a quarter of the network input; 2048 x 2048 keeps the window (about 21 bytes per
   // pixel per estimate, docs/fusion.md) under 1 GB at the default window of 8.
@@ -224,6 +259,7 @@ class FusionNodelet : public nodelet::Nodelet {
   ros::Subscriber estimate_sub_;
   ros::ServiceServer save_srv_, reset_srv_;
   ros::WallTimer timer_;
+  std::unique_ptr<ReconfigureServer<unsup_mvs::FusionConfig>> reconfigure_;
 };
 
 boost::shared_ptr<nodelet::Nodelet> make_fusion_nodelet() { return boost::make_shared<FusionNodelet>(); }

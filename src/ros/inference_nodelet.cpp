@@ -1,6 +1,7 @@
 // inference: KeyframeSet -> MVSNet -> DepthEstimate (+ depth and confidence images). Thin around
 // core::DepthEstimator. The network runs on a worker thread; when it is busy only the newest
-// keyframe set waits (latest wins). See docs/ros.md for topics and parameters.
+// keyframe set waits (latest wins). The network resolution and plane count can be tuned live
+// (dynamic_reconfigure, cfg/Inference.cfg). See docs/ros.md for topics and parameters.
 #include <diagnostic_msgs/DiagnosticArray.h>
 #include <image_transport/image_transport.h>
 #include <nodelet/nodelet.h>
@@ -19,6 +20,7 @@
 #include <thread>
 
 #include "unsup_mvs/DepthEstimate.h"
+#include "unsup_mvs/InferenceConfig.h"
 #include "unsup_mvs/KeyframeSet.h"
 #include "unsup_mvs/ReloadModel.h"
 #include "unsup_mvs/core/depth_estimator.h"
@@ -30,6 +32,7 @@
 #include "unsup_mvs/io/input_limits.h"
 #include "unsup_mvs/ros/nodelets.h"
 #include "unsup_mvs/ros/params.h"
+#include "unsup_mvs/ros/reconfigure.h"
 
 namespace umvs_ros {
 
@@ -50,6 +53,39 @@ umvs::ViewInput view_from_msg(const sensor_msgs::Image& image, const sensor_msgs
   }
 }
 
+// The live-tunable network settings (cfg/Inference.cfg), both ways.
+unsup_mvs::InferenceConfig to_reconfigure(const umvs::DepthEstimatorConfig& c) {
+  unsup_mvs::InferenceConfig r = unsup_mvs::InferenceConfig::__getDefault__();
+  r.max_width = c.max_width;
+  r.max_height = c.max_height;
+  r.num_depth = c.num_depth;
+  return r;
+}
+
+umvs::DepthEstimatorConfig with_reconfigure(umvs::DepthEstimatorConfig c, const unsup_mvs::InferenceConfig& r) {
+  c.max_width = r.max_width;
+  c.max_height = r.max_height;
+  c.num_depth = r.num_depth;
+  return c;
+}
+
+bool same_settings(const umvs::DepthEstimatorConfig& a, const umvs::DepthEstimatorConfig& b) {
+  return a.max_width == b.max_width && a.max_height == b.max_height && a.num_depth == b.num_depth;
+}
+
+// An estimator serving `model` with `config`; refused (std::invalid_argument) when it would run
+// more than max_planes depth planes.
+std::unique_ptr<umvs::DepthEstimator> make_estimator(const umvs::MvsNet& model, const torch::Device& device,
+                                                     const umvs::DepthEstimatorConfig& config, int max_planes) {
+  auto estimator = std::make_unique<umvs::DepthEstimator>(model, device, config);
+  if (estimator->num_depth() > max_planes) {
+    throw std::invalid_argument("it runs with " + std::to_string(estimator->num_depth()) +
+                                " depth planes, more than ~max_planes " + std::to_string(max_planes) +
+                                " (set ~num_depth to override the checkpoint's)");
+  }
+  return estimator;
+}
+
 }  // namespace
 
 class InferenceNodelet : public nodelet::Nodelet {
@@ -65,7 +101,8 @@ class InferenceNodelet : public nodelet::Nodelet {
     ros::NodeHandle& nh = getNodeHandle();
     ros::NodeHandle& pnh = getPrivateNodeHandle();
     try {
-      const InferenceNodeConfig c = inference_node_config_from_ros(pnh);
+      node_ = inference_node_config_from_ros(pnh);
+      const InferenceNodeConfig& c = node_;
       device_ = umvs::parse_device(c.device);
       threads_ = c.threads;
       config_ = c.estimator;
@@ -111,6 +148,21 @@ class InferenceNodelet : public nodelet::Nodelet {
     reload_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &reload_queue_);
     reload_spinner_->start();
     worker_ = std::thread(&InferenceNodelet::work, this);
+    reconfigure_ = std::make_unique<ReconfigureServer<unsup_mvs::InferenceConfig>>(
+        pnh, "inference", to_reconfigure(config_), [this](const unsup_mvs::InferenceConfig& r) { onReconfigure(r); });
+  }
+
+  // A new resolution or plane count from dynamic_reconfigure: checked as at start-up, then the
+  // served model is rebuilt with it for the next keyframe set (after the one running, if any).
+  // Throws std::invalid_argument (naming the parameter) and changes nothing when invalid.
+  void onReconfigure(const unsup_mvs::InferenceConfig& request) {
+    InferenceNodeConfig next = node_;
+    next.estimator = with_reconfigure(node_.estimator, request);
+    next.validate();
+    std::lock_guard<std::mutex> lock(model_mutex_);
+    if (estimator_) estimator_ = make_estimator(estimator_->model(), device_, next.estimator, max_planes_);
+    config_ = next.estimator;
+    node_ = next;
   }
 
   // Lazy subscription: keyframe sets are only received while someone listens to an output.
@@ -242,12 +294,7 @@ class InferenceNodelet : public nodelet::Nodelet {
     umvs::checked_file_size(path, max_bytes, "checkpoint");  // before reading: no FIFO, device or huge file
     umvs::LoadedModel loaded = umvs::load_model(path, device);
     Candidate c;
-    c.estimator = std::make_unique<umvs::DepthEstimator>(loaded.model, device, config);
-    if (c.estimator->num_depth() > max_planes) {
-      throw std::runtime_error("it runs with " + std::to_string(c.estimator->num_depth()) +
-                               " depth planes, more than ~max_planes " + std::to_string(max_planes) +
-                               " (set ~num_depth to override the checkpoint's)");
-    }
+    c.estimator = make_estimator(loaded.model, device, config, max_planes);
     // Smoke test: a fronto-parallel camera pair of 64x64 with 8 planes.
     umvs::Camera cam;
     cam.width = cam.height = 64;
@@ -268,6 +315,9 @@ class InferenceNodelet : public nodelet::Nodelet {
 
   void install(Candidate candidate, const std::string& path, std::string* message) {
     std::lock_guard<std::mutex> lock(model_mutex_);
+    if (!same_settings(candidate.estimator->config(), config_)) {  // reconfigured while it loaded
+      candidate.estimator = make_estimator(candidate.estimator->model(), device_, config_, max_planes_);
+    }
     estimator_ = std::move(candidate.estimator);
     checkpoint_ = path;
     *message = candidate.description;
@@ -296,8 +346,13 @@ class InferenceNodelet : public nodelet::Nodelet {
     } else {
       auto result = std::make_shared<std::promise<Candidate>>();
       std::future<Candidate> done = result->get_future();
+      umvs::DepthEstimatorConfig config;
+      {
+        std::lock_guard<std::mutex> lock(model_mutex_);  // config_ may be reconfigured meanwhile
+        config = config_;
+      }
       ++*loads_running_;
-      std::thread([result, path, device = device_, config = config_, max_bytes = max_checkpoint_bytes_,
+      std::thread([result, path, device = device_, config, max_bytes = max_checkpoint_bytes_,
                    max_planes = max_planes_, running = loads_running_] {
         Candidate candidate;
         std::exception_ptr error;
@@ -338,7 +393,8 @@ class InferenceNodelet : public nodelet::Nodelet {
   torch::Device device_{torch::kCPU};
   int threads_ = 0;
   bool rectified_ = false;
-  umvs::DepthEstimatorConfig config_;
+  InferenceNodeConfig node_;        // as started, then as reconfigured (changed only by onReconfigure)
+  umvs::DepthEstimatorConfig config_;  // node_.estimator, read by reloads (under model_mutex_)
   std::string checkpoint_;
   std::mutex model_mutex_;
   std::unique_ptr<umvs::DepthEstimator> estimator_;
@@ -363,6 +419,7 @@ class InferenceNodelet : public nodelet::Nodelet {
   image_transport::Publisher depth_pub_, confidence_pub_;
   ros::Subscriber keyframes_sub_;
   ros::ServiceServer reload_srv_;
+  std::unique_ptr<ReconfigureServer<unsup_mvs::InferenceConfig>> reconfigure_;
 };
 
 boost::shared_ptr<nodelet::Nodelet> make_inference_nodelet() { return boost::make_shared<InferenceNodelet>(); }

@@ -1,5 +1,6 @@
 // keyframe_selector: calibrated, posed images -> KeyframeSet (a reference keyframe + its best
-// neighbours) whenever the camera moved enough. See docs/ros.md for topics and parameters.
+// neighbours) whenever the camera moved enough. The keyframe policy and depth range can be tuned
+// live (dynamic_reconfigure, cfg/KeyframeSelector.cfg). See docs/ros.md for topics and parameters.
 #include <geometry_msgs/PoseArray.h>
 #include <image_transport/image_transport.h>
 #include <image_transport/subscriber_filter.h>
@@ -21,14 +22,48 @@
 #include <mutex>
 
 #include "unsup_mvs/DepthEstimate.h"
+#include "unsup_mvs/KeyframeSelectorConfig.h"
 #include "unsup_mvs/KeyframeSet.h"
 #include "unsup_mvs/core/depth_range.h"
 #include "unsup_mvs/core/keyframes.h"
 #include "unsup_mvs/io/ros/ros_conversions.h"
 #include "unsup_mvs/ros/nodelets.h"
 #include "unsup_mvs/ros/params.h"
+#include "unsup_mvs/ros/reconfigure.h"
 
 namespace umvs_ros {
+
+namespace {
+
+// The live-tunable part of the stream config (cfg/KeyframeSelector.cfg), both ways.
+unsup_mvs::KeyframeSelectorConfig to_reconfigure(const umvs::KeyframeStreamConfig& c) {
+  unsup_mvs::KeyframeSelectorConfig r = unsup_mvs::KeyframeSelectorConfig::__getDefault__();
+  r.min_translation = c.keyframes.min_translation;
+  r.min_rotation_deg = c.keyframes.min_rotation_deg;
+  r.min_pose_distance = c.keyframes.min_pose_distance;
+  r.buffer_size = c.keyframes.buffer_size;
+  r.num_sources = c.keyframes.num_sources;
+  r.min_view_score = c.keyframes.min_score;
+  r.view_score_grid = c.keyframes.score_grid;
+  r.depth_min = c.depth_min;
+  r.depth_max = c.depth_max;
+  return r;
+}
+
+umvs::KeyframeStreamConfig with_reconfigure(umvs::KeyframeStreamConfig c, const unsup_mvs::KeyframeSelectorConfig& r) {
+  c.keyframes.min_translation = r.min_translation;
+  c.keyframes.min_rotation_deg = r.min_rotation_deg;
+  c.keyframes.min_pose_distance = r.min_pose_distance;
+  c.keyframes.buffer_size = r.buffer_size;
+  c.keyframes.num_sources = r.num_sources;
+  c.keyframes.min_score = r.min_view_score;
+  c.keyframes.score_grid = r.view_score_grid;
+  c.depth_min = r.depth_min;
+  c.depth_max = r.depth_max;
+  return c;
+}
+
+}  // namespace
 
 class KeyframeSelectorNodelet : public nodelet::Nodelet {
  public:
@@ -57,12 +92,10 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
     pnh.param("max_image_pixels", max_image_pixels_, kDefaultMaxImagePixels);
     try {
       if (max_image_pixels_ < 1) throw std::invalid_argument("max_image_pixels must be >= 1");
-      const umvs::KeyframeStreamConfig stream = keyframe_stream_config_from_ros(pnh);
-      buffer_ = std::make_unique<umvs::KeyframeBuffer>(stream.keyframes);
-      rectified_ = stream.rectified;
-      depth_min_ = stream.depth_min;
-      depth_max_ = stream.depth_max;
-      depth_range_ = std::make_unique<umvs::DepthRangeTracker>(depth_min_, depth_max_);
+      stream_ = keyframe_stream_config_from_ros(pnh);
+      buffer_ = std::make_unique<umvs::KeyframeBuffer>(stream_.keyframes);
+      rectified_ = stream_.rectified;
+      depth_range_ = std::make_unique<umvs::DepthRangeTracker>(stream_.depth_min, stream_.depth_max);
       if (queue_size < 1) throw std::invalid_argument("queue_size must be >= 1");
     } catch (const std::exception& e) {
       NODELET_FATAL("keyframe_selector: invalid parameters: %s", e.what());
@@ -89,13 +122,32 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
     // Beside the sync: notice images that have no CameraInfo to pair with (the sync stays silent).
     image_sub_.registerCallback(&KeyframeSelectorNodelet::onAnyImage, this);
     info_sub_.registerCallback(&KeyframeSelectorNodelet::onAnyInfo, this);
-    const auto& c = buffer_->config();
+    reconfigure_ = std::make_unique<ReconfigureServer<unsup_mvs::KeyframeSelectorConfig>>(
+        pnh, "keyframe_selector", to_reconfigure(stream_),
+        [this](const unsup_mvs::KeyframeSelectorConfig& r) { onReconfigure(r); });
+    const auto& c = stream_.keyframes;
     NODELET_INFO("keyframe_selector: %s + %s in '%s' (%s sync), keyframe after %.2f m / %.1f deg / pose distance %.2f, "
                  "buffer %d, %d neighbours, depth %.2f-%.2f m%s",
                  image_sub_.getTopic().c_str(), info_sub_.getTopic().c_str(), world_frame_.c_str(),
                  approximate_sync ? "approximate" : "exact", c.min_translation, c.min_rotation_deg, c.min_pose_distance,
-                 c.buffer_size, c.num_sources, depth_min_, depth_max_,
+                 c.buffer_size, c.num_sources, stream_.depth_min, stream_.depth_max,
                  depth_from_estimates_ ? " (then from depth estimates)" : "");
+  }
+
+  // A new keyframe policy or depth range from dynamic_reconfigure: checked as at start-up, used
+  // from the next frame. New bounds restart the depth range (until the next depth estimate).
+  // Throws std::invalid_argument (naming the parameter) and changes nothing when invalid.
+  void onReconfigure(const unsup_mvs::KeyframeSelectorConfig& request) {
+    const umvs::KeyframeStreamConfig next = with_reconfigure(stream_, request);
+    next.validate();
+    std::unique_ptr<umvs::DepthRangeTracker> tracker;
+    if (next.depth_min != stream_.depth_min || next.depth_max != stream_.depth_max) {
+      tracker = std::make_unique<umvs::DepthRangeTracker>(next.depth_min, next.depth_max);
+    }
+    std::lock_guard<std::mutex> lock(mutex_);
+    for (const int64_t id : buffer_->set_config(next.keyframes)) frames_by_id_.erase(id);
+    if (tracker) depth_range_ = std::move(tracker);
+    stream_ = next;
   }
 
   void onAnyInfo(const sensor_msgs::CameraInfoConstPtr&) { last_info_wall_ = ros::WallTime::now().toSec(); }
@@ -229,7 +281,8 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
   static constexpr double kInfoSilenceSeconds = 3.0;  // images without CameraInfo for this long: warn
 
   std::string world_frame_;
-  double tf_timeout_ = 0.1, depth_min_ = 0.3, depth_max_ = 10.0;
+  double tf_timeout_ = 0.1;
+  umvs::KeyframeStreamConfig stream_;  // as started, then as reconfigured (changed only by onReconfigure)
   int max_image_pixels_ = kDefaultMaxImagePixels;
   std::atomic<double> first_image_wall_{0.0}, last_info_wall_{0.0};  // wall seconds, 0 = none yet
   bool rectified_ = false, depth_from_estimates_ = true;
@@ -248,6 +301,7 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
   std::unique_ptr<message_filters::Synchronizer<ApproxPolicy>> approx_sync_;
   ros::Publisher keyframes_pub_, poses_pub_;
   ros::Subscriber estimate_sub_;
+  std::unique_ptr<ReconfigureServer<unsup_mvs::KeyframeSelectorConfig>> reconfigure_;
 };
 
 boost::shared_ptr<nodelet::Nodelet> make_keyframe_selector_nodelet() {

@@ -61,6 +61,13 @@ void InferenceNodeConfig::validate() const {
   if (estimator.num_depth != 0 && (estimator.num_depth < 8 || estimator.num_depth % 8 != 0)) {
     throw std::invalid_argument("num_depth must be 0 (the checkpoint's) or a positive multiple of 8");
   }
+  // The network input is cropped to multiples of 32: a smaller bound leaves no image.
+  for (const auto& [name, size] : {std::pair<const char*, int>{"max_width", estimator.max_width},
+                                   std::pair<const char*, int>{"max_height", estimator.max_height}}) {
+    if (size != 0 && size < 32) {
+      throw std::invalid_argument(std::string(name) + " must be 0 (no limit) or at least 32, got " + std::to_string(size));
+    }
+  }
   if (max_image_pixels < 1 || max_views < 2 || max_planes < 8 || max_checkpoint_mb < 1 || !(reload_timeout > 0)) {
     throw std::invalid_argument("need max_image_pixels >= 1, max_views >= 2, max_planes >= 8, max_checkpoint_mb >= 1 "
                                 "and reload_timeout > 0");

@@ -139,10 +139,15 @@ class StreamingFusion {
   size_t num_views() const;                           // estimates currently in the ring
   int window() const { return window_; }
   const FusionConfig& config() const { return config_; }
+  // New thresholds for the estimates added from now on (live tuning). Throws
+  // std::invalid_argument naming the field, keeping the old ones. Stored estimates keep the
+  // confident pixels they were added with; a new voxel_size applies to the whole cloud from now on.
+  void set_config(const FusionConfig& config);
 
  private:
   struct Entry;
   void append_points(PointCloud& points);
+  void rebuild_voxel_index();  // voxels_ from cloud_ at config_.voxel_size
   FusionConfig config_;
   int window_;
   size_t max_points_;

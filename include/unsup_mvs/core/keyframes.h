@@ -84,6 +84,10 @@ class KeyframeBuffer {
   const Keyframe* find(int64_t id) const;  // nullptr when not (or no longer) buffered
   const std::deque<Keyframe>& keyframes() const { return keyframes_; }
   const KeyframeConfig& config() const { return config_; }
+  // A new policy for the frames from now on (live tuning). Throws std::invalid_argument naming
+  // the field, keeping the old one. Beyond a smaller buffer_size the oldest keyframes are
+  // dropped; their ids are returned.
+  std::vector<int64_t> set_config(const KeyframeConfig& config);
   void clear();
 
  private:
