@@ -7,6 +7,7 @@ tools as a user would and checks what they print. Every wait is on a condition (
 appearing, `rostopic echo -n 1` returning), bounded by a timeout.
 """
 import os
+import shutil
 import subprocess
 import sys
 import threading
@@ -20,7 +21,7 @@ from sensor_msgs.msg import CameraInfo, Image
 from unsup_mvs.msg import KeyframeSet
 
 PKG = 'unsup_mvs'
-TIMEOUT = 60.0
+TIMEOUT = 120.0
 
 
 def run(args, timeout=TIMEOUT):
@@ -85,7 +86,9 @@ class RosToolsTest(unittest.TestCase):
         rospy.init_node('test_ros_tools')
         cls.work = rospy.get_param('~work_dir')
         cls.model = rospy.get_param('~model')
-        os.makedirs(cls.work, exist_ok=True)
+        os.makedirs(os.path.join(cls.work, 'models'), exist_ok=True)
+        # The trainer compares a new model with the served one: it must be readable.
+        shutil.copyfile(cls.model, os.path.join(cls.work, 'served.pt'))
         for service in ('/inference/reload_model', '/fusion/save_cloud', '/fusion/reset',
                         '/trainer/status', '/trainer/fine_tune', '/trainer/cancel'):
             rospy.wait_for_service(service, timeout=TIMEOUT)
