@@ -142,6 +142,48 @@ TEST(ImportRgbd, WritesGroundTruthDepthAndInvertsThePoses) {
   }
 }
 
+// A 16-bit binary PGM (P5, maxval 65535: big-endian samples), as some RGB-D datasets store depth.
+static void write_pgm_u16(const std::string& path, const torch::Tensor& raw) {
+  std::ofstream out(path, std::ios::binary);
+  out << "P5\n" << raw.size(1) << " " << raw.size(0) << "\n65535\n";
+  auto a = raw.accessor<int32_t, 2>();
+  for (int64_t y = 0; y < raw.size(0); ++y) {
+    for (int64_t x = 0; x < raw.size(1); ++x) out.put(static_cast<char>(a[y][x] >> 8)).put(static_cast<char>(a[y][x] & 0xff));
+  }
+}
+
+TEST(ImportRgbd, Reads16BitPgmDepthMatchedByStem) {
+  const std::string root = test::temp_dir("import_rgbd_pgm");
+  fs::create_directories(root + "/data/color");
+  fs::create_directories(root + "/data/depth");
+  std::ofstream pose(root + "/data/pose.txt");
+  for (int i = 1; i <= 3; ++i) {
+    pose << 0.1 * i << " 0 0 0 0 0 1\n";
+    write_png(root + "/data/color/" + std::to_string(i) + ".png", torch::full({24, 32, 3}, 50 * i, torch::kUInt8));
+    auto raw = torch::full({24, 32}, 5000 * (1 + i), torch::kInt32);  // (1 + i) metres: above 8 bits
+    raw[3][4] = 5000 * (1 + i) + 777;                                   // a sample whose low byte matters
+    raw[0][0] = 0;                                                      // no depth
+    write_pgm_u16(root + "/data/depth/" + std::to_string(i) + ".pgm", raw);
+  }
+  pose.close();
+  RgbdImportConfig cfg;
+  cfg.data_dir = root + "/data";
+  cfg.out_dir = root + "/out";
+  EXPECT_EQ(import_rgbd(cfg).views, 3);
+  MvsFolder folder(cfg.out_dir);
+  for (int i = 1; i <= 3; ++i) {
+    auto depth = read_pfm(folder.depth_gt_path(i));
+    EXPECT_FLOAT_EQ(depth[5][5].item<float>(), 1.0f + i);
+    EXPECT_FLOAT_EQ(depth[3][4].item<float>(), (5000.0f * (1 + i) + 777.0f) / 5000.0f);
+    EXPECT_FLOAT_EQ(depth[0][0].item<float>(), 0.0f);
+  }
+  // No depth image under any known extension: the message names the stem and the extensions tried.
+  fs::remove(root + "/data/depth/2.pgm");
+  cfg.out_dir = root + "/out2";
+  EXPECT_THAT([&] { import_rgbd(cfg); },
+              testing::ThrowsMessage<std::runtime_error>(testing::HasSubstr("depth/2.{png,pgm,tif,tiff}")));
+}
+
 TEST(ImportRgbd, BadPoseNamesTheLine) {
   const std::string root = test::temp_dir("import_rgbd_bad");
   fs::create_directories(root + "/color");

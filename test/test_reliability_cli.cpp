@@ -27,6 +27,7 @@
 #include "unsup_mvs/io/image_io.h"
 #include "unsup_mvs/io/input_limits.h"
 #include "unsup_mvs/io/mvs_folder.h"
+#include "unsup_mvs/io/plane_count.h"
 #include "unsup_mvs/io/ply.h"
 #include "unsup_mvs/io/run_folder.h"
 
@@ -257,6 +258,31 @@ TEST(InferArguments, ImpossibleDepthRangesAreRefusedAndTheUsedRangeIsSaid) {
   ASSERT_EQ(ok.status, 0) << ok.output;
   EXPECT_TRUE(contains(ok.output, "0.5 (from --depth-min) .. 6 (from --depth-max); its cam file gives")) << ok.output;
   EXPECT_DOUBLE_EQ(read_cam_file(dir + "/ok/cams/00000000_cam.txt").depth_min, 0.5);
+}
+
+TEST(InferArguments, PlaneCountFollowsTheInputSizeNotTheCheckpoint) {
+  EXPECT_EQ(default_plane_count(640), 128);   // MVSNet training
+  EXPECT_EQ(default_plane_count(1600), 192);  // MVSNet on DTU
+  EXPECT_EQ(default_plane_count(320), 64);
+  EXPECT_EQ(default_plane_count(96), 16);
+  const std::string dir = test::temp_dir("planes");
+  const std::string data = scene("planes_data");  // 96x64
+  torch::manual_seed(1);
+  MvsNetConfig cfg;
+  cfg.num_depth = 32;  // as if fine-tuned with 32 planes
+  MvsNet net(cfg);
+  save_checkpoint(dir + "/model32.pt", net);
+  const std::string common = "infer --data " + data + " --checkpoint " + dir + "/model32.pt --threads 1 --ref 0 --out ";
+  Result by_default = run_umvs(common + dir + "/default");
+  ASSERT_EQ(by_default.status, 0) << by_default.output;
+  EXPECT_TRUE(contains(by_default.output, "depth planes: 16 planes (default for a 96x64 network input")) << by_default.output;
+  EXPECT_TRUE(contains(by_default.output, "the checkpoint was trained with 32")) << by_default.output;
+  EXPECT_EQ(read_cam_file(dir + "/default/cams/00000000_cam.txt").depth_num, 16);
+  Result given = run_umvs(common + dir + "/given --num-depth 24");
+  ASSERT_EQ(given.status, 0) << given.output;
+  EXPECT_TRUE(contains(given.output, "depth planes: 24 planes (--num-depth; the checkpoint was trained with 32)"))
+      << given.output;
+  EXPECT_EQ(read_cam_file(dir + "/given/cams/00000000_cam.txt").depth_num, 24);
 }
 
 TEST(ResourceBounds, PlanesVolumesAndImagesAboveTheBoundsAreRefused) {

@@ -83,6 +83,16 @@ void set_depth_range(MvsCam& cam, double zmin, double zmax, double margin, int d
   cam.depth_interval = (cam.depth_max - cam.depth_min) / (depth_num - 1);
 }
 
+// The depth image of a colour frame: the same stem in depth/, whatever the format (RGB-D
+// sequences pair colour JPEGs or PNGs with 16-bit PNG or PGM depth).
+std::string depth_image_for(const std::string& depth_dir, const std::string& color_path) {
+  const std::string stem = fs::path(color_path).stem().string();
+  for (const char* ext : {".png", ".pgm", ".tif", ".tiff"}) {
+    const fs::path candidate = fs::path(depth_dir) / (stem + ext);
+    if (fs::is_regular_file(candidate)) return candidate.string();
+  }
+  throw std::runtime_error("no depth image " + depth_dir + "/" + stem + ".{png,pgm,tif,tiff} for " + color_path);
+}
 }  // namespace
 
 bool parse_middlebury_bbox(const std::string& text, Eigen::Vector3d* min, Eigen::Vector3d* max) {
@@ -249,8 +259,7 @@ ImportSummary import_rgbd(const RgbdImportConfig& config) {
       throw std::runtime_error(color_path + ": no line " + std::to_string(id) + " in " + pose_path + " (" + std::to_string(poses.size()) +
                                " poses)");
     }
-    std::string depth_path = config.data_dir + "/depth/" + fs::path(color_path).filename().string();
-    if (!fs::exists(depth_path)) throw std::runtime_error("no depth image " + depth_path + " for " + color_path);
+    const std::string depth_path = depth_image_for(config.data_dir + "/depth", color_path);
     const auto image = read_image_rgb8(color_path);
     const auto raw = read_image_u16(depth_path);
     if (raw.size(0) != image.size(0) || raw.size(1) != image.size(1)) {

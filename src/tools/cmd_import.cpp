@@ -21,7 +21,7 @@ UMVS_COMMAND(import, "convert a Middlebury or RGB-D data set to an MVSNet-format
   const std::string usage =
       "umvs import middlebury --data DIR --out OUT   Middlebury multi-view (e.g. templeRing): *_par.txt\n"
       "                                              calibration, bounding box from README.txt or --bbox\n"
-      "umvs import rgbd --data DIR --out OUT         color/N.png, depth/N.png (16-bit), pose.txt\n"
+      "umvs import rgbd --data DIR --out OUT         color/N.png, depth/N.png or .pgm (16-bit), pose.txt\n"
       "                                              ('tx ty tz qx qy qz qw' camera-to-world); writes depth_gt/\n"
       "View ids are the numbers in the image names. Depth ranges: the bounding box (middlebury) or the\n"
       "ground-truth depth (rgbd), widened by --margin. pair.txt ranks neighbours by MVSNet's\n"

@@ -16,6 +16,7 @@
 #include "unsup_mvs/io/image_io.h"
 #include "unsup_mvs/io/inference_folder.h"
 #include "unsup_mvs/io/mvs_folder.h"
+#include "unsup_mvs/io/plane_count.h"
 #include "unsup_mvs/tools/args.h"
 #include "unsup_mvs/tools/command.h"
 #include "unsup_mvs/tools/progress.h"
@@ -48,7 +49,7 @@ UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
       .required("checkpoint", "model: our checkpoint or MVSNet_pytorch weights")
       .required("out", "output folder")
       .option("views", "3", "views per depth map (reference + neighbours)")
-      .option("num-depth", "0", "depth hypotheses (multiple of 8; 0 = the checkpoint's)")
+      .option("num-depth", "0", "depth planes (multiple of 8; 0 = 128 at 640 wide, scaled with the width)")
       .option("depth-sampling", "", "depth|inverse_depth (default: the checkpoint's)")
       .option("max-width", "0", "scale images down to at most this width (0 = keep)")
       .option("max-height", "0", "scale images down to at most this height (0 = keep)")
@@ -75,11 +76,6 @@ UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
   umvs::DepthEstimatorConfig cfg;
   cfg.max_width = args.integer("max-width");
   cfg.max_height = args.integer("max-height");
-  cfg.num_depth = args.integer("num-depth");
-  umvs::DepthEstimator estimator(loaded.model, device, cfg);
-  std::cerr << "model: " << args.str("checkpoint") << " (" << loaded.format << ", " << loaded.model->config().to_string()
-            << "), " << estimator.num_depth() << " depth planes, device " << device << ", "
-            << torch::get_num_threads() << " threads\n";
 
   std::vector<int> refs = args.integers("ref");
   if (refs.empty()) {
@@ -91,12 +87,23 @@ UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
     if (it == cache.end()) it = cache.emplace(id, folder.load_view(id)).first;
     return it->second;
   };
-  // The network input of the first reference must fit in memory before anything is written.
+  // The plane count follows the network input of the first reference (as MVSNet's 640x512 ->
+  // 128), not the checkpoint; that input must fit in memory before anything is written.
+  umvs::NetworkResize plan{};
+  plan.width = 640;
+  plan.height = 512;
   if (!refs.empty()) {
     const auto& first = view(refs.front()).cam.camera;
-    const auto plan = umvs::plan_network_resize(first.width, first.height, cfg.max_width, cfg.max_height);
-    umvs::check_inference_memory(plan.width, plan.height, estimator.num_depth(), views);
+    plan = umvs::plan_network_resize(first.width, first.height, cfg.max_width, cfg.max_height);
   }
+  const umvs::PlaneCount planes = umvs::choose_plane_count(args.integer("num-depth"), "--num-depth", plan.width,
+                                                           plan.height, loaded.model->config().num_depth);
+  cfg.num_depth = planes.planes;
+  umvs::DepthEstimator estimator(loaded.model, device, cfg);
+  std::cerr << "model: " << args.str("checkpoint") << " (" << loaded.format << ", " << loaded.model->config().to_string()
+            << "), device " << device << ", " << torch::get_num_threads() << " threads\n"
+            << "depth planes: " << planes.why << "\n";
+  if (!refs.empty()) umvs::check_inference_memory(plan.width, plan.height, estimator.num_depth(), views);
   const std::string out = args.str("out");
   const umvs::InferenceFolder written(out);
   written.create();

@@ -5,8 +5,9 @@
 //    (README.txt of the data set or given). Depth ranges come from the box corners seen by each
 //    camera, pair.txt from MVSNet's view-selection score on points sampled in the box.
 //  * RGB-D sequences in the TUM/ICL-NUIM layout used by slambook2: color/N.png, depth/N.png
-//    (16-bit, value / depth_scale metres, z-depth, 0 = no depth), pose.txt line N =
-//    "tx ty tz qx qy qz qw" camera-to-world. Depth becomes depth_gt/XXXXXXXX.pfm.
+//    (or .pgm/.tif with the colour image's stem; 16-bit, value / depth_scale metres, z-depth,
+//    0 = no depth), pose.txt line N = "tx ty tz qx qy qz qw" camera-to-world. Depth becomes
+//    depth_gt/XXXXXXXX.pfm.
 // View ids are the numbers in the file names (templeR0013.png -> 13, color/4.png -> 4).
 #pragma once
 
