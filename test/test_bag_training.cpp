@@ -2,6 +2,12 @@
 // room logged with BagWriter.
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <rosbag/bag.h>
+#include <rosbag/view.h>
+#include <sensor_msgs/CompressedImage.h>
+#include <sensor_msgs/Image.h>
 #include <torch/torch.h>
 
 #include <cstdlib>
@@ -14,6 +20,7 @@
 #include "unsup_mvs/core/synth.h"
 #include "unsup_mvs/io/ros/bag_io.h"
 #include "unsup_mvs/io/ros/bag_training_data.h"
+#include "unsup_mvs/io/ros/ros_conversions.h"
 
 namespace {
 
@@ -87,6 +94,73 @@ TEST(BagTraining, KeyframesFollowTheSelectorPolicyAndHoldOutEveryKth) {
     EXPECT_EQ(keyframes[k].held_out, k % 4 == 3) << "keyframe " << k;
     EXPECT_FALSE(keyframes[k].image.depth.defined()) << "no depth topic was asked for";
   }
+}
+
+// The logged room again, its images as sensor_msgs/CompressedImage (`format`: "png" or "jpeg", as
+// a camera driver or image_transport's compressed transport records them). `corrupt_frame` >= 0
+// replaces that frame's bytes with garbage.
+std::string compressed_copy(const std::string& raw_bag, const std::string& format, int corrupt_frame = -1) {
+  const std::string out = umvs::test::temp_dir("bag_compressed_" + format + std::to_string(corrupt_frame)) + "/room.bag";
+  const umvs::BagTopics topics;
+  rosbag::Bag in(raw_bag, rosbag::bagmode::Read), copy(out, rosbag::bagmode::Write);
+  int frame = 0;
+  for (const rosbag::MessageInstance& m : rosbag::View(in)) {
+    const auto image = m.instantiate<sensor_msgs::Image>();
+    if (!image || m.getTopic() != topics.image) {
+      copy.write(m.getTopic(), m.getTime(), m);
+      continue;
+    }
+    const torch::Tensor rgb = umvs::image_msg_to_rgb8(*image);
+    cv::Mat bgr;
+    cv::cvtColor(cv::Mat(rgb.size(0), rgb.size(1), CV_8UC3, rgb.data_ptr()), bgr, cv::COLOR_RGB2BGR);
+    sensor_msgs::CompressedImage c;
+    c.header = image->header;
+    c.format = format;
+    cv::imencode(format == "png" ? ".png" : ".jpg", bgr, c.data);
+    if (frame++ == corrupt_frame) std::fill(c.data.begin() + 2, c.data.end(), 0x5a);
+    copy.write(topics.image, m.getTime(), c);
+  }
+  copy.close();
+  return out;
+}
+
+TEST(BagTraining, CompressedImagesGiveTheSameKeyframesAsRawOnes) {
+  const auto& room = logged_room();
+  const auto config = room_config();
+  const auto raw = umvs::read_bag_keyframes({room.bag}, config);
+  const auto png = umvs::read_bag_keyframes({compressed_copy(room.bag, "png")}, config);
+  const auto jpeg = umvs::read_bag_keyframes({compressed_copy(room.bag, "jpeg")}, config);
+  ASSERT_GE(raw.size(), 8u);
+  ASSERT_EQ(png.size(), raw.size());
+  ASSERT_EQ(jpeg.size(), raw.size());
+  for (size_t k = 0; k < raw.size(); ++k) {
+    EXPECT_EQ(png[k].frame, raw[k].frame);
+    EXPECT_EQ(jpeg[k].frame, raw[k].frame);
+    EXPECT_TRUE(same_pose(png[k].image.camera, raw[k].image.camera));
+    // png is lossless: the same pixels; jpeg: close (a few grey levels on average).
+    EXPECT_TRUE(torch::equal(png[k].image.image, raw[k].image.image)) << "keyframe " << k;
+    const double jpeg_error =
+        (jpeg[k].image.image.to(torch::kFloat) - raw[k].image.image.to(torch::kFloat)).abs().mean().item<double>();
+    EXPECT_GT(jpeg_error, 0.0) << "jpeg is lossy: the copy was really re-encoded";
+    EXPECT_LT(jpeg_error, 6.0) << "keyframe " << k;
+  }
+}
+
+TEST(BagTraining, ACompressedFrameThatDoesNotDecodeIsSkippedWithTheReason) {
+  const auto& room = logged_room();
+  const std::string bag = compressed_copy(room.bag, "png", 3);
+  const umvs::BagReadStats stats =
+      umvs::for_each_posed_image(bag, umvs::BagTopics{}, true, [](const umvs::PosedImage&) { return true; });
+  EXPECT_EQ(stats.images, room.scene.views.size());
+  EXPECT_EQ(stats.invalid, 1u);
+  EXPECT_EQ(stats.used, room.scene.views.size() - 1);
+  EXPECT_THAT(stats.first_error, testing::HasSubstr("cannot be decoded"));
+  // A depth image in compressedDepth format is named as such, not decoded as colours.
+  sensor_msgs::CompressedImage depth;
+  depth.format = "32FC1; compressedDepth";
+  depth.data = {1, 2, 3};
+  EXPECT_THAT([&] { umvs::compressed_to_image_msg(depth, 1 << 20); },
+              testing::ThrowsMessage<std::invalid_argument>(testing::HasSubstr("is a depth image")));
 }
 
 TEST(BagTraining, GroundTruthDepthFromADepthTopicReachesTheTuples) {

@@ -2,6 +2,7 @@
 
 #include <torch/torch.h>
 
+#include <algorithm>
 #include <stdexcept>
 
 #include "unsup_mvs/io/atomic_file.h"
@@ -35,26 +36,52 @@ void check_image_file(const std::string& path) {
   int width = 0, height = 0;
   if (probe_image_size(path, &width, &height)) check_image_pixels(width, height, "image '" + path + "'");
 }
+// The same bounds for an encoded image in memory.
+void check_encoded_image(const uint8_t* data, size_t size, const std::string& what) {
+  if (size == 0) throw std::runtime_error(what + " is empty");
+  if (size > static_cast<size_t>(kMaxImageFileBytes)) {
+    throw std::runtime_error(what + " has " + std::to_string(size) + " bytes, more than the " +
+                             std::to_string(kMaxImageFileBytes >> 20) + " MiB accepted for one image");
+  }
+  int width = 0, height = 0;
+  const std::string head(reinterpret_cast<const char*>(data), std::min<size_t>(size, 64 * 1024));
+  if (probe_image_header(head, &width, &height)) check_image_pixels(width, height, what);
+}
 }  // namespace
 #endif
 
 #if defined(UMVS_HAVE_OPENCV)
 
-torch::Tensor read_image_rgb8(const std::string& path) {
-  check_image_file(path);
-  cv::Mat img = cv::imread(path, cv::IMREAD_UNCHANGED);
-  if (img.empty()) throw std::runtime_error("cannot read image '" + path + "' (missing or not an image)");
-  check_image_pixels(img.cols, img.rows, "image '" + path + "'");
+namespace {
+// A decoded image (BGR order, as OpenCV gives it) -> uint8 [H,W,3] RGB.
+torch::Tensor mat_to_rgb8(cv::Mat img, const std::string& what) {
+  check_image_pixels(img.cols, img.rows, what);
   if (img.depth() == CV_16U) img.convertTo(img, CV_8U, 1.0 / 257.0);
-  if (img.depth() != CV_8U) throw std::runtime_error("image '" + path + "' has an unsupported pixel type");
+  if (img.depth() != CV_8U) throw std::runtime_error(what + " has an unsupported pixel type");
   cv::Mat rgb;
   switch (img.channels()) {
     case 1: cv::cvtColor(img, rgb, cv::COLOR_GRAY2RGB); break;
     case 3: cv::cvtColor(img, rgb, cv::COLOR_BGR2RGB); break;
     case 4: cv::cvtColor(img, rgb, cv::COLOR_BGRA2RGB); break;
-    default: throw std::runtime_error("image '" + path + "' has " + std::to_string(img.channels()) + " channels");
+    default: throw std::runtime_error(what + " has " + std::to_string(img.channels()) + " channels");
   }
   return torch::from_blob(rgb.data, {rgb.rows, rgb.cols, 3}, torch::kUInt8).clone();
+}
+}  // namespace
+
+torch::Tensor read_image_rgb8(const std::string& path) {
+  check_image_file(path);
+  cv::Mat img = cv::imread(path, cv::IMREAD_UNCHANGED);
+  if (img.empty()) throw std::runtime_error("cannot read image '" + path + "' (missing or not an image)");
+  return mat_to_rgb8(img, "image '" + path + "'");
+}
+
+torch::Tensor decode_image_rgb8(const uint8_t* data, size_t size, const std::string& what) {
+  check_encoded_image(data, size, what);
+  const cv::Mat encoded(1, static_cast<int>(size), CV_8UC1, const_cast<uint8_t*>(data));
+  cv::Mat img = cv::imdecode(encoded, cv::IMREAD_UNCHANGED);
+  if (img.empty()) throw std::runtime_error(what + " cannot be decoded (not a PNG or JPEG?)");
+  return mat_to_rgb8(img, what);
 }
 
 torch::Tensor read_image_u16(const std::string& path) {
@@ -110,6 +137,16 @@ torch::Tensor read_image_rgb8(const std::string& path) {
   return out;
 }
 
+torch::Tensor decode_image_rgb8(const uint8_t* bytes, size_t size, const std::string& what) {
+  check_encoded_image(bytes, size, what);
+  int w, h, c;
+  unsigned char* data = stbi_load_from_memory(bytes, static_cast<int>(size), &w, &h, &c, 3);
+  if (!data) throw std::runtime_error(what + " cannot be decoded: " + stbi_failure_reason());
+  auto out = torch::from_blob(data, {h, w, 3}, torch::kUInt8).clone();
+  stbi_image_free(data);
+  return out;
+}
+
 torch::Tensor read_image_u16(const std::string& path) {
   check_image_file(path);
   int w, h, c;
@@ -139,6 +176,7 @@ void write_png_u16(const std::string& path, const torch::Tensor&) {
 
 torch::Tensor read_image_rgb8(const std::string& path) { fail_msg::unsupported(path); }
 torch::Tensor read_image_u16(const std::string& path) { fail_msg::unsupported(path); }
+torch::Tensor decode_image_rgb8(const uint8_t*, size_t, const std::string& what) { fail_msg::unsupported(what); }
 void write_png(const std::string& path, const torch::Tensor&) { fail_msg::unsupported(path); }
 void write_png_u16(const std::string& path, const torch::Tensor&) { fail_msg::unsupported(path); }
 

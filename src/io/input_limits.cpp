@@ -154,6 +154,10 @@ bool probe_image_size(const std::string& path, int* width, int* height) {
   std::string head(64 * 1024, '\0');
   in.read(head.data(), static_cast<std::streamsize>(head.size()));
   head.resize(static_cast<size_t>(in.gcount()));
+  return probe_image_header(head, width, height);
+}
+
+bool probe_image_header(const std::string& head, int* width, int* height) {
   auto be = [&](size_t at, int size) -> uint64_t {
     uint64_t v = 0;
     for (int i = 0; i < size; ++i) v = (v << 8) | static_cast<uint8_t>(head[at + i]);

@@ -4,6 +4,7 @@
 #include <geometry_msgs/PoseArray.h>
 #include <image_transport/image_transport.h>
 #include <image_transport/subscriber_filter.h>
+#include <message_filters/pass_through.h>
 #include <message_filters/subscriber.h>
 #include <message_filters/sync_policies/approximate_time.h>
 #include <message_filters/sync_policies/exact_time.h>
@@ -90,8 +91,13 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
     bool approximate_sync = false;
     pnh.param("approximate_sync", approximate_sync, approximate_sync);
     pnh.param("max_image_pixels", max_image_pixels_, kDefaultMaxImagePixels);
+    std::string transport = "raw";
+    pnh.param("image_transport", transport, transport);
     try {
       if (max_image_pixels_ < 1) throw std::invalid_argument("max_image_pixels must be >= 1");
+      if (transport != "raw" && transport != "compressed") {
+        throw std::invalid_argument("image_transport must be 'raw' or 'compressed', got '" + transport + "'");
+      }
       stream_ = keyframe_stream_config_from_ros(pnh);
       buffer_ = std::make_unique<umvs::KeyframeBuffer>(stream_.keyframes);
       rectified_ = stream_.rectified;
@@ -108,19 +114,20 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
     poses_pub_ = nh.advertise<geometry_msgs::PoseArray>("keyframe_poses", 1, true);
     if (depth_from_estimates_) estimate_sub_ = nh.subscribe("depth_estimate", 1, &KeyframeSelectorNodelet::onEstimate, this);
 
-    it_ = std::make_unique<image_transport::ImageTransport>(nh);
-    const image_transport::TransportHints hints("raw", ros::TransportHints(), pnh);
-    image_sub_.subscribe(*it_, "image", queue_size, hints);
     info_sub_.subscribe(nh, "camera_info", queue_size);
-    if (approximate_sync) {
-      approx_sync_ = std::make_unique<message_filters::Synchronizer<ApproxPolicy>>(ApproxPolicy(queue_size), image_sub_, info_sub_);
-      approx_sync_->registerCallback(&KeyframeSelectorNodelet::onImage, this);
+    if (transport == "compressed") {
+      // jpeg/png on <image>/compressed, as image_transport's `compressed` transport names it; Debian
+      // ships no compressed_image_transport plugin, so the selector decodes them itself (io).
+      image_topic_ = nh.resolveName("image") + "/compressed";
+      compressed_sub_ = nh.subscribe(image_topic_, queue_size, &KeyframeSelectorNodelet::onCompressedImage, this);
+      synchronise(decoded_images_, queue_size, approximate_sync);
     } else {
-      exact_sync_ = std::make_unique<message_filters::Synchronizer<ExactPolicy>>(ExactPolicy(queue_size), image_sub_, info_sub_);
-      exact_sync_->registerCallback(&KeyframeSelectorNodelet::onImage, this);
+      it_ = std::make_unique<image_transport::ImageTransport>(nh);
+      const image_transport::TransportHints hints("raw", ros::TransportHints(), pnh);
+      image_topic_ = nh.resolveName("image");
+      image_sub_.subscribe(*it_, "image", queue_size, hints);
+      synchronise(image_sub_, queue_size, approximate_sync);
     }
-    // Beside the sync: notice images that have no CameraInfo to pair with (the sync stays silent).
-    image_sub_.registerCallback(&KeyframeSelectorNodelet::onAnyImage, this);
     info_sub_.registerCallback(&KeyframeSelectorNodelet::onAnyInfo, this);
     reconfigure_ = std::make_unique<ReconfigureServer<unsup_mvs::KeyframeSelectorConfig>>(
         pnh, "keyframe_selector", to_reconfigure(stream_),
@@ -128,7 +135,7 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
     const auto& c = stream_.keyframes;
     NODELET_INFO("keyframe_selector: %s + %s in '%s' (%s sync), keyframe after %.2f m / %.1f deg / pose distance %.2f, "
                  "buffer %d, %d neighbours, depth %.2f-%.2f m%s",
-                 image_sub_.getTopic().c_str(), info_sub_.getTopic().c_str(), world_frame_.c_str(),
+                 image_topic_.c_str(), info_sub_.getTopic().c_str(), world_frame_.c_str(),
                  approximate_sync ? "approximate" : "exact", c.min_translation, c.min_rotation_deg, c.min_pose_distance,
                  c.buffer_size, c.num_sources, stream_.depth_min, stream_.depth_max,
                  depth_from_estimates_ ? " (then from depth estimates)" : "");
@@ -150,6 +157,31 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
     stream_ = next;
   }
 
+  // Images (raw or decoded) paired with their CameraInfo, exactly or approximately by stamp.
+  template <typename ImageFilter>
+  void synchronise(ImageFilter& images, int queue_size, bool approximate) {
+    if (approximate) {
+      approx_sync_ = std::make_unique<message_filters::Synchronizer<ApproxPolicy>>(ApproxPolicy(queue_size), images, info_sub_);
+      approx_sync_->registerCallback(&KeyframeSelectorNodelet::onImage, this);
+    } else {
+      exact_sync_ = std::make_unique<message_filters::Synchronizer<ExactPolicy>>(ExactPolicy(queue_size), images, info_sub_);
+      exact_sync_->registerCallback(&KeyframeSelectorNodelet::onImage, this);
+    }
+    // Beside the sync: notice images that have no CameraInfo to pair with (the sync stays silent).
+    images.registerCallback(&KeyframeSelectorNodelet::onAnyImage, this);
+  }
+
+  void onCompressedImage(const sensor_msgs::CompressedImageConstPtr& msg) {
+    sensor_msgs::ImagePtr image;
+    try {
+      image = boost::make_shared<sensor_msgs::Image>(umvs::compressed_to_image_msg(*msg, static_cast<uint64_t>(max_image_pixels_)));
+    } catch (const std::exception& e) {
+      NODELET_ERROR_THROTTLE(2.0, "keyframe_selector: bad image on '%s': %s; frame skipped", image_topic_.c_str(), e.what());
+      return;
+    }
+    decoded_images_.add(image);
+  }
+
   void onAnyInfo(const sensor_msgs::CameraInfoConstPtr&) { last_info_wall_ = ros::WallTime::now().toSec(); }
 
   void onAnyImage(const sensor_msgs::ImageConstPtr&) {
@@ -160,7 +192,7 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
     if (now - std::max(first_image, last_info) < kInfoSilenceSeconds) return;
     NODELET_WARN_THROTTLE(kInfoSilenceSeconds, "keyframe_selector: images arrive on '%s' but %s on '%s'; nothing is "
                           "processed until image and camera_info arrive together",
-                          image_sub_.getTopic().c_str(),
+                          image_topic_.c_str(),
                           last_info > 0 ? "no CameraInfo came for a while" : "no CameraInfo has come",
                           info_sub_.getTopic().c_str());
   }
@@ -176,7 +208,7 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
       // Here, where images enter: a truncated image kept as a keyframe would spoil every later set.
       umvs::check_image_msg(*image, static_cast<uint64_t>(max_image_pixels_));
     } catch (const std::exception& e) {
-      NODELET_ERROR_THROTTLE(2.0, "keyframe_selector: bad image on '%s': %s; frame skipped", image_sub_.getTopic().c_str(),
+      NODELET_ERROR_THROTTLE(2.0, "keyframe_selector: bad image on '%s': %s; frame skipped", image_topic_.c_str(),
                              e.what());
       return;
     }
@@ -295,7 +327,10 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
   std::unique_ptr<tf2_ros::Buffer> tf_buffer_;
   std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
   std::unique_ptr<image_transport::ImageTransport> it_;
-  image_transport::SubscriberFilter image_sub_;
+  image_transport::SubscriberFilter image_sub_;                      // image_transport:=raw
+  message_filters::PassThrough<sensor_msgs::Image> decoded_images_;  // image_transport:=compressed,
+  ros::Subscriber compressed_sub_;                                    // decoded from here
+  std::string image_topic_;
   message_filters::Subscriber<sensor_msgs::CameraInfo> info_sub_;
   std::unique_ptr<message_filters::Synchronizer<ExactPolicy>> exact_sync_;
   std::unique_ptr<message_filters::Synchronizer<ApproxPolicy>> approx_sync_;

@@ -1,13 +1,19 @@
 // rostest for keyframe_selector: a camera moving along x (tf2 + Image + CameraInfo) gives
 // KeyframeSets with the right stamps, frames, neighbours and depth range; bad input (unsupported
 // encoding, missing transform, NaN pose, distorted calibration) is logged and skipped, and the
-// node keeps working.
+// node keeps working. With ~compressed (keyframe_selector_compressed.test) the images go as png
+// sensor_msgs/CompressedImage on /cam/image/compressed to a selector with image_transport:=compressed.
+#include <sensor_msgs/CompressedImage.h>
 #include <tf2_msgs/TFMessage.h>
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include <cmath>
 
 #include "rostest_util.h"
 #include "unsup_mvs/KeyframeSet.h"
+#include "unsup_mvs/io/ros/ros_conversions.h"
 
 namespace {
 
@@ -16,7 +22,12 @@ using umvs_test::wait_for;
 class KeyframeSelectorTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    image_pub_ = nh_.advertise<sensor_msgs::Image>("/cam/image", 10);
+    ros::NodeHandle("~").param("compressed", compressed_, false);
+    if (compressed_) {
+      image_pub_ = nh_.advertise<sensor_msgs::CompressedImage>("/cam/image/compressed", 10);
+    } else {
+      image_pub_ = nh_.advertise<sensor_msgs::Image>("/cam/image", 10);
+    }
     info_pub_ = nh_.advertise<sensor_msgs::CameraInfo>("/cam/camera_info", 10);
     tf_pub_ = nh_.advertise<tf2_msgs::TFMessage>("/tf", 100);
     sets_sub_ = nh_.subscribe("/keyframes", 20, &KeyframeSelectorTest::onSet, this);
@@ -48,13 +59,30 @@ class KeyframeSelectorTest : public ::testing::Test {
     auto info = umvs_test::make_info(160, 128, 120.0, header);
     if (distorted) info.D[0] = -0.2;
     info_pub_.publish(info);
-    image_pub_.publish(umvs_test::make_image(160, 128, header, 0, encoding));
+    const sensor_msgs::Image image = umvs_test::make_image(160, 128, header, 0, encoding);
+    if (compressed_) {
+      image_pub_.publish(png(image));
+    } else {
+      image_pub_.publish(image);
+    }
     stamps_.push_back(stamp);
     ros::WallDuration(0.05).sleep();
     ros::spinOnce();
   }
 
+  static sensor_msgs::CompressedImage png(const sensor_msgs::Image& image) {
+    const torch::Tensor rgb = umvs::image_msg_to_rgb8(image);
+    cv::Mat bgr;
+    cv::cvtColor(cv::Mat(rgb.size(0), rgb.size(1), CV_8UC3, rgb.data_ptr()), bgr, cv::COLOR_RGB2BGR);
+    sensor_msgs::CompressedImage c;
+    c.header = image.header;
+    c.format = "rgb8; png compressed bgr8";
+    cv::imencode(".png", bgr, c.data);
+    return c;
+  }
+
   ros::NodeHandle nh_;
+  bool compressed_ = false;
   ros::Publisher image_pub_, info_pub_, tf_pub_;
   ros::Subscriber sets_sub_;
   std::vector<unsup_mvs::KeyframeSetConstPtr> sets_;
@@ -79,6 +107,9 @@ TEST_F(KeyframeSelectorTest, KeyframeSetsFromAMovingCamera) {
     EXPECT_EQ(s.reference_image.header.stamp, s.header.stamp);
     EXPECT_EQ(s.reference_image.header.frame_id, "cam");
     EXPECT_EQ(s.reference_info.width, 160u);
+    // The pixels sent (lossless png when compressed), as rgb8.
+    EXPECT_EQ(s.reference_image.encoding, "rgb8");
+    EXPECT_EQ(s.reference_image.data, umvs_test::make_image(160, 128, s.reference_image.header).data);
     EXPECT_NEAR(s.reference_pose.position.x, 0.102 * (k + 2), 1e-9);
     ASSERT_EQ(s.source_ids.size(), 2u);
     ASSERT_EQ(s.source_images.size(), 2u);

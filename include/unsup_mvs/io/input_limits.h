@@ -40,6 +40,8 @@ void verify_zip_archive(const std::string& bytes, const std::string& path);
 // Width and height from a PNG or JPEG header without decoding the image; false when the file is
 // neither (or its header is unreadable: the decoder then reports it).
 bool probe_image_size(const std::string& path, int* width, int* height);
+// The same for the first bytes of an encoded image in memory (a CompressedImage's data).
+bool probe_image_header(const std::string& head, int* width, int* height);
 
 // Throws std::runtime_error naming `what` when width x height exceeds kMaxImagePixels.
 void check_image_pixels(int64_t width, int64_t height, const std::string& what);

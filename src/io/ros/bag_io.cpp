@@ -1,5 +1,6 @@
 #include "unsup_mvs/io/ros/bag_io.h"
 
+#include <boost/make_shared.hpp>
 #include <rosbag/bag.h>
 #include <rosbag/view.h>
 #include <tf2/buffer_core.h>
@@ -17,6 +18,7 @@
 
 #include "unsup_mvs/io/ros/ros_conversions.h"
 #include "unsup_mvs/io/file_safety.h"
+#include "unsup_mvs/io/input_limits.h"
 
 namespace umvs {
 
@@ -139,8 +141,20 @@ BagReadStats for_each_posed_image(const std::string& path, const BagTopics& topi
     // Pass 2: images.
     rosbag::View view(bag, rosbag::TopicQuery(topics.image));
     for (const rosbag::MessageInstance& m : view) {
-      auto img = m.instantiate<sensor_msgs::Image>();
-      if (!img) continue;
+      sensor_msgs::Image::ConstPtr img = m.instantiate<sensor_msgs::Image>();
+      if (!img) {
+        // jpeg/png (a camera driver's or image_transport's `compressed` topic): decoded here.
+        const auto compressed = m.instantiate<sensor_msgs::CompressedImage>();
+        if (!compressed) continue;
+        try {
+          img = boost::make_shared<sensor_msgs::Image>(compressed_to_image_msg(*compressed, kMaxImagePixels));
+        } catch (const std::invalid_argument& e) {
+          ++stats.images;
+          ++stats.invalid;
+          note("image at " + std::to_string(compressed->header.stamp.toSec()) + ": " + e.what());
+          continue;
+        }
+      }
       ++stats.images;
       if (infos.empty()) {
         ++stats.without_info;

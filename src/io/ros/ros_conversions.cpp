@@ -9,6 +9,8 @@
 #include <limits>
 #include <stdexcept>
 
+#include "unsup_mvs/io/image_io.h"
+
 namespace umvs {
 
 namespace enc = sensor_msgs::image_encodings;
@@ -85,6 +87,28 @@ torch::Tensor image_msg_to_rgb8(const sensor_msgs::Image& msg) {
   auto rgb = px.slice(2, 0, 3);
   if (e == enc::BGR8 || e == enc::BGRA8) rgb = rgb.flip(2);
   return rgb.contiguous();
+}
+
+sensor_msgs::Image compressed_to_image_msg(const sensor_msgs::CompressedImage& msg, uint64_t max_pixels) {
+  // format: "jpeg", "png", or image_transport's "<encoding>; jpeg compressed <encoding>".
+  if (msg.format.find("compressedDepth") != std::string::npos) {
+    throw std::invalid_argument("compressed image format '" + msg.format + "' is a depth image, not a camera image");
+  }
+  if (!msg.format.empty() && msg.format.find("jpeg") == std::string::npos &&
+      msg.format.find("jpg") == std::string::npos && msg.format.find("png") == std::string::npos) {
+    throw std::invalid_argument("compressed image format '" + msg.format + "' is not jpeg or png");
+  }
+  torch::Tensor rgb8;
+  try {
+    rgb8 = decode_image_rgb8(msg.data.data(), msg.data.size(), "compressed image (" + msg.format + ")");
+  } catch (const std::runtime_error& e) {
+    throw std::invalid_argument(e.what());
+  }
+  if (static_cast<uint64_t>(rgb8.size(0)) * static_cast<uint64_t>(rgb8.size(1)) > max_pixels) {
+    throw std::invalid_argument("compressed image is " + std::to_string(rgb8.size(1)) + "x" + std::to_string(rgb8.size(0)) +
+                                ", more than " + std::to_string(max_pixels) + " pixels");
+  }
+  return rgb8_to_image_msg(rgb8, msg.header);
 }
 
 sensor_msgs::Image rgb8_to_image_msg(const torch::Tensor& rgb8, const std_msgs::Header& header) {

@@ -5,6 +5,7 @@
 #include <geometry_msgs/Pose.h>
 #include <geometry_msgs/Transform.h>
 #include <sensor_msgs/CameraInfo.h>
+#include <sensor_msgs/CompressedImage.h>
 #include <sensor_msgs/Image.h>
 #include <torch/types.h>
 
@@ -27,6 +28,11 @@ void check_image_msg(const sensor_msgs::Image& msg, uint64_t max_pixels);
 // row padding and big-endian mono16 handled). Throws std::invalid_argument naming the encoding or
 // the size mismatch.
 torch::Tensor image_msg_to_rgb8(const sensor_msgs::Image& msg);
+// sensor_msgs/CompressedImage (jpeg or png, what image_transport's `compressed` transport and
+// most camera drivers' bags carry) -> rgb8 image with the same header, at most `max_pixels`.
+// Throws std::invalid_argument naming the problem (compressedDepth, another format, a corrupt or
+// oversized image).
+sensor_msgs::Image compressed_to_image_msg(const sensor_msgs::CompressedImage& msg, uint64_t max_pixels);
 // uint8 [H,W,3] RGB -> rgb8 image.
 sensor_msgs::Image rgb8_to_image_msg(const torch::Tensor& rgb8, const std_msgs::Header& header);
 // float32 [H,W] -> 32FC1 image (depth in metres, REP 118).
