@@ -43,8 +43,8 @@ echo "[check_catkin] built and installed in $((SECONDS - start)) s (log: $ws/cat
 
 # Runs a command in a shell that sourced $1/setup.bash.
 in_space() { local space=$1; shift; "${clean_env[@]}" bash -c "source '$space/setup.bash' && $*"; }
-expect_umvs_help() {  # the tool's command list, as `umvs --help` prints it
-  grep -q "usage: umvs <command>" <<<"$1" && grep -q "infer" <<<"$1"
+expect_umvs_help() {  # the tool's subcommand list, as `umvs --help` (CLI11) prints it
+  grep -q "^Usage: umvs \[OPTIONS\] SUBCOMMAND" <<<"$1" && grep -qE "^  infer +depth" <<<"$1"
 }
 
 for space in "$ws/devel" "$ws/install"; do
