@@ -311,6 +311,60 @@ TEST(TrainingRun, LogsEveryStepResumesAndRefusesAnOccupiedFolderBeforeReadingDat
   EXPECT_EQ(load_model(out + "/last.pt", torch::kCPU).meta.step, 4);
 }
 
+TEST(Training, CosineScheduleDecaysFromLrToLrMinAndTheRunUsesIt) {
+  TrainerConfig cfg;
+  cfg.lr = 1e-3;
+  cfg.lr_min = 1e-5;
+  EXPECT_DOUBLE_EQ(learning_rate_at(cfg, 7, 100), 1e-3);  // constant by default
+  cfg.lr_schedule = parse_lr_schedule("cosine");
+  EXPECT_DOUBLE_EQ(learning_rate_at(cfg, 0, 101), 1e-3);
+  EXPECT_NEAR(learning_rate_at(cfg, 50, 101), 0.5 * (1e-3 + 1e-5), 1e-12);  // half way: the mean
+  EXPECT_NEAR(learning_rate_at(cfg, 100, 101), 1e-5, 1e-15);
+  for (int s = 1; s < 101; ++s) EXPECT_LT(learning_rate_at(cfg, s, 101), learning_rate_at(cfg, s - 1, 101));
+  EXPECT_THROW(parse_lr_schedule("step"), std::invalid_argument);
+  cfg.lr_min = 2e-3;  // above lr
+  EXPECT_THROW(cfg.validate(), std::invalid_argument);
+
+  // The trainer applies the rate it is given: at 0 a step leaves every weight as it was.
+  const std::string data = write_scene("cosine", 96, 64, 5, 2);
+  TupleConfig dcfg;
+  dcfg.views_in = 3;
+  dcfg.views_loss = 2;
+  dcfg.width = 96;
+  dcfg.height = 64;
+  MvsFolderSource source({data}, dcfg);
+  MvsNetConfig mcfg;
+  mcfg.num_depth = 8;
+  TrainerConfig tcfg;
+  tcfg.num_depth = 8;
+  tcfg.loss.top_k = 2;
+  MvsNet model(mcfg);
+  Trainer trainer(model, torch::kCPU, tcfg);
+  trainer.set_learning_rate(0.0);
+  EXPECT_EQ(trainer.learning_rate(), 0.0);
+  std::vector<torch::Tensor> before;
+  for (const auto& p : model->parameters()) before.push_back(p.clone());
+  ASSERT_TRUE(std::isfinite(trainer.step({source.tuple(0, nullptr)}).total));
+  for (size_t i = 0; i < before.size(); ++i) EXPECT_TRUE(torch::equal(before[i], model->parameters()[i])) << i;
+  trainer.set_learning_rate(1e-3);
+  trainer.step({source.tuple(0, nullptr)});
+  EXPECT_FALSE(torch::equal(before[0], model->parameters()[0]));
+
+  // `umvs train --lr-schedule cosine`: the log's lr column follows the schedule.
+  const std::string out = test::temp_dir("cosine_out");
+  const std::string common = "--data " + data + " --width 96 --height 64 --num-depth 8 --views-loss 3 --top-k 2" +
+                             " --threads 1 --lr 1e-3 --lr-schedule cosine --lr-min 0 --save-every 3";
+  ASSERT_EQ(run(common + " --steps 3 --out " + out + "/run"), 0);
+  const auto rows = read_csv_rows(out + "/run/train_log.csv");
+  ASSERT_EQ(rows.size(), 3u);
+  EXPECT_NEAR(*train_log_row(rows[0]).lr, 1e-3, 1e-12);
+  EXPECT_NEAR(*train_log_row(rows[1]).lr, 5e-4, 1e-12);
+  EXPECT_NEAR(*train_log_row(rows[2]).lr, 0.0, 1e-12);
+  EXPECT_NE(run(common + " --steps 3 --lr-schedule step --out " + out + "/bad"), 0);
+  EXPECT_NE(run(common + " --steps 3 --lr-min 0.01 --out " + out + "/bad"), 0);
+  EXPECT_FALSE(std::filesystem::exists(out + "/bad/last.pt"));
+}
+
 TEST(Training, LossCurveAndDepthErrors) {
   CurveSeries s;
   for (int i = 0; i < 100; ++i) s.x.push_back(i), s.y.push_back(1.0 / (1 + i));

@@ -124,12 +124,27 @@ DepthErrors depth_errors(const torch::Tensor& est, const torch::Tensor& gt) {
   return out;
 }
 
+double learning_rate_at(const TrainerConfig& config, int64_t step, int64_t total_steps) {
+  if (config.lr_schedule == LrSchedule::kConstant || total_steps <= 1) return config.lr;
+  const double progress = std::clamp(static_cast<double>(step) / static_cast<double>(total_steps - 1), 0.0, 1.0);
+  return config.lr_min + 0.5 * (config.lr - config.lr_min) * (1.0 + std::cos(M_PI * progress));
+}
+
+LrSchedule parse_lr_schedule(const std::string& name) {
+  if (name == "constant") return LrSchedule::kConstant;
+  if (name == "cosine") return LrSchedule::kCosine;
+  throw std::invalid_argument("learning-rate schedule must be constant or cosine, got '" + name + "'");
+}
+
 void TrainerConfig::validate() const {
   loss.validate();
   if (num_depth < 8 || num_depth % 8 != 0) {
     throw std::invalid_argument("num_depth must be a positive multiple of 8, got " + std::to_string(num_depth));
   }
   if (!(lr > 0) || !std::isfinite(lr)) throw std::invalid_argument("learning rate must be positive");
+  if (!(lr_min >= 0) || !(lr_min <= lr)) {
+    throw std::invalid_argument("the final learning rate (lr_min " + std::to_string(lr_min) + ") must be in [0, lr]");
+  }
   if (!(beta1 >= 0 && beta1 < 1) || !(beta2 >= 0 && beta2 < 1)) throw std::invalid_argument("Adam betas must be in [0,1)");
   if (!(supervised_weight >= 0) || !std::isfinite(supervised_weight)) {
     throw std::invalid_argument("supervised weight must be finite and >= 0");
@@ -289,6 +304,14 @@ void Trainer::load_optimizer_state(const std::string& bytes) {
   std::istringstream is(bytes);
   archive.load_from(is, device_);
   optimizer_->load(archive);
+}
+
+void Trainer::set_learning_rate(double lr) {
+  for (auto& group : optimizer_->param_groups()) static_cast<torch::optim::AdamOptions&>(group.options()).lr(lr);
+}
+
+double Trainer::learning_rate() const {
+  return static_cast<const torch::optim::AdamOptions&>(optimizer_->param_groups().at(0).options()).lr();
 }
 
 namespace {

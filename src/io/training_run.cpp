@@ -398,6 +398,8 @@ TrainingRun::Result TrainingRun::run(
       if (writes_files()) save_checkpoint(round_path, trainer_->model(), m);
     }
     const auto t0 = std::chrono::steady_clock::now();
+    const double lr = learning_rate_at(config_.trainer, step_, config_.steps);
+    trainer_->set_learning_rate(lr);
     const std::vector<TrainingTuple> tuples = next_tuples();
     LossValues loss = trainer_->step(tuples).mean();
     ++step_;
@@ -416,7 +418,7 @@ TrainingRun::Result TrainingRun::run(
       out_of_time = s[6] > 0;
     }
     result.out_of_time = out_of_time;
-    TrainLogRow row = log_row(step_, loss, config_.trainer.lr,
+    TrainLogRow row = log_row(step_, loss, lr,
                               std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
     if (!loss.updated || !std::isfinite(loss.total)) {
       ++result.skipped_steps;

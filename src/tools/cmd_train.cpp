@@ -256,7 +256,10 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
       .option("micro-batch", "0",
               "tuples per forward pass, the step's gradient accumulated over them (0 = the whole batch); "
               "BatchNorm statistics are per micro-batch")
-      .option("lr", "1e-3", "Adam learning rate")
+      .option("lr", "1e-3", "Adam learning rate (at the first step)")
+      .option("lr-schedule", "constant",
+              "constant | cosine (from --lr at the first step down to --lr-min at the last of --steps)")
+      .option("lr-min", "0", "cosine schedule: learning rate at the last step")
       .option("beta1", "0.95", "Adam beta1")
       .option("val", "", "validation folder(s), comma-separated")
       .option("val-tuples", "0", "validate on at most this many tuples (0 = all)")
@@ -301,6 +304,8 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
   tcfg.supervised_weight = args.real("supervised-weight");
   tcfg.num_depth = args.integer("num-depth");
   tcfg.lr = args.real("lr");
+  tcfg.lr_schedule = umvs::parse_lr_schedule(args.str("lr-schedule"));
+  tcfg.lr_min = args.real("lr-min");
   tcfg.beta1 = args.real("beta1");
   tcfg.micro_batch = args.integer("micro-batch");
   tcfg.validate();

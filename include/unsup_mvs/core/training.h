@@ -68,10 +68,17 @@ struct DepthErrors {
 };
 DepthErrors depth_errors(const torch::Tensor& est, const torch::Tensor& gt);
 
+// Learning rate over a run: constant, or cosine from TrainerConfig::lr at the first step down to
+// lr_min at the last (the decay a long run needs to settle instead of wandering).
+enum class LrSchedule { kConstant, kCosine };
+LrSchedule parse_lr_schedule(const std::string& name);  // "constant" | "cosine"
+
 struct TrainerConfig {
   LossConfig loss;
   int num_depth = 128;      // hypotheses per depth map during training (multiple of 8)
-  double lr = 1e-3;         // Adam
+  double lr = 1e-3;         // Adam (the rate at step 0; see lr_schedule)
+  LrSchedule lr_schedule = LrSchedule::kConstant;
+  double lr_min = 0.0;      // the cosine schedule's rate at the last step
   double beta1 = 0.95;
   double beta2 = 0.999;
   // Weight of supervised_depth_loss (tuples marked supervised: rendered scenes) against the
@@ -82,6 +89,9 @@ struct TrainerConfig {
   int micro_batch = 0;
   void validate() const;
 };
+
+// The learning rate of step `step` (0-based) of a run of `total_steps` under config's schedule.
+double learning_rate_at(const TrainerConfig& config, int64_t step, int64_t total_steps);
 
 // Scalar results of one step or evaluation (averages over the batches).
 struct LossValues {
@@ -119,6 +129,9 @@ class Trainer {
   // Adam state as bytes (torch::serialize::OutputArchive), for CheckpointMeta::optimizer_state.
   std::string optimizer_state() const;
   void load_optimizer_state(const std::string& bytes);
+  // Sets Adam's learning rate for the following steps (learning_rate_at).
+  void set_learning_rate(double lr);
+  double learning_rate() const;
 
   MvsNet& model() { return model_; }
   const TrainerConfig& config() const { return config_; }
