@@ -7,6 +7,7 @@
 #include <iostream>
 
 #include "test_util.h"
+#include "unsup_mvs/core/device.h"
 #include "unsup_mvs/core/fast_mvsnet.h"
 #include "unsup_mvs/core/geometry.h"
 #include "unsup_mvs/core/mvsnet.h"
@@ -115,6 +116,17 @@ INSTANTIATE_TEST_SUITE_P(Sizes, FastPath,
                                            Case{160, 128, 32, 3, DepthSampling::kUniformDepth},
                                            Case{128, 96, 24, 4, DepthSampling::kUniformInverseDepth},
                                            Case{320, 256, 16, 3, DepthSampling::kUniformInverseDepth}));
+
+TEST(Threads, ParallelLoopsOfThisLibraryRunOnTheThreadsAsked) {
+  // at::parallel_for compiled into our code without OpenMP runs on one thread whatever
+  // torch::set_num_threads says (the cost volume and fusion were serial that way).
+  const int before = torch::get_num_threads();
+  torch::set_num_threads(2);
+  EXPECT_EQ(parallel_loop_threads(), 2);
+  torch::set_num_threads(1);
+  EXPECT_EQ(parallel_loop_threads(), 1);
+  torch::set_num_threads(before);
+}
 
 TEST(FastPath, CostVolumeMatchesTheWarpedVolumes) {
   // variance_cost_volume against its definition: mean of squares minus square of the mean over

@@ -176,6 +176,10 @@ UMVS_COMMAND(bench, "time and memory of the network on synthetic input") {
     umvs::configure_threads(args.integer("threads"));
   }
   const auto device = umvs::parse_device(args.str("device"));
+  if (const int used = umvs::parallel_loop_threads(); used < torch::get_num_threads()) {
+    std::cerr << "warning: the parallel loops of this build run on " << used << " of " << torch::get_num_threads()
+              << " threads (built without OpenMP? see UMVS_OPENMP in CMakeLists.txt)\n";
+  }
   const int W = args.integer("width"), H = args.integer("height"), D = args.integer("num-depth"), V = args.integer("views");
   const int runs = args.integer("runs");
   if (runs < 1) throw std::invalid_argument("--runs must be >= 1");

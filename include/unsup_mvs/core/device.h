@@ -20,7 +20,13 @@ void configure_threads(int threads);
 //  - OpenBLAS limited to 1 thread (openblas_set_num_threads found with dlsym): its own threads
 //    otherwise spin in sched_yield next to LibTorch's OpenMP pool;
 //  - glibc malloc keeps large blocks in the heap (no mmap, no trimming), so that the tensors of
-//    one forward pass reuse the pages of the previous one instead of page-faulting fresh ones.
+//    one forward pass reuse the pages of the previous one instead of page-faulting fresh ones,
+//    in one arena (per-thread arenas would each keep their own peak).
 std::string tune_cpu_process();
+
+// Threads that an at::parallel_for in this library really runs on (with the current
+// torch::get_num_threads()): 1 when the library was compiled without OpenMP although LibTorch's
+// backend is OpenMP. For diagnostics (umvs bench) and tests.
+int parallel_loop_threads();
 
 }  // namespace umvs
