@@ -1,5 +1,7 @@
 #include "unsup_mvs/core/view_selection.h"
 
+#include <ATen/Parallel.h>
+
 #include <algorithm>
 #include <cmath>
 
@@ -42,10 +44,13 @@ std::vector<Eigen::Vector3d> sample_frustum_points(const Camera& ref, double dep
 std::vector<ScoredView> rank_source_views(const std::vector<Eigen::Vector3d>& points,
                                           const Camera& ref, const std::vector<Camera>& candidates,
                                           const ViewScoreConfig& config) {
+  std::vector<double> scores(candidates.size(), 0.0);
+  at::parallel_for(0, static_cast<int64_t>(candidates.size()), 1, [&](int64_t begin, int64_t end) {
+    for (int64_t i = begin; i < end; ++i) scores[i] = view_selection_score(points, ref, candidates[i], config);
+  });
   std::vector<ScoredView> ranked;
   for (size_t i = 0; i < candidates.size(); ++i) {
-    const double s = view_selection_score(points, ref, candidates[i], config);
-    if (s > 0.0) ranked.push_back({static_cast<int>(i), s});
+    if (scores[i] > 0.0) ranked.push_back({static_cast<int>(i), scores[i]});
   }
   std::stable_sort(ranked.begin(), ranked.end(),
                    [](const ScoredView& a, const ScoredView& b) { return a.score > b.score; });

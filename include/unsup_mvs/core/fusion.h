@@ -169,8 +169,8 @@ torch::Tensor valid_estimate_mask(const torch::Tensor& depth, const torch::Tenso
 //   is read as it is (0 or non-finite = no depth) and src_valid is not used.
 //   -> agree [H,W] bool, depth [H,W] float32: the source's depth seen from the reference (d'),
 //      meaningful where agree is true.
-// On the CPU a per-pixel loop (float64 geometry), elsewhere check_consistency_tensor_ops; the
-// two agree up to float32 rounding of the geometry (tested).
+// On the CPU a per-pixel loop (float32 geometry; float64 with kMvsnetEval, as eval.py's NumPy),
+// elsewhere check_consistency_tensor_ops; the two agree up to rounding on borderline pixels (tested).
 struct ConsistencyCheck {
   torch::Tensor agree;
   torch::Tensor depth;
