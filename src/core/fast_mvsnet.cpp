@@ -117,19 +117,22 @@ torch::Tensor conv_relu(const torch::Tensor& x, const FoldedConv& layer) {
   return onednn_conv3d(x, layer.weight, layer.bias, layer.stride, {1, 1, 1}).relu_();
 }
 
-torch::Tensor deconv_relu(const torch::Tensor& x, const SubPixelDeconv& layer) {
+// skip + relu(transposed convolution of x), written into `skip` (the U-Net's skip connection,
+// not needed afterwards): no output buffer of the full size is allocated.
+torch::Tensor deconv_relu_add_into(const torch::Tensor& x, const SubPixelDeconv& layer, torch::Tensor skip) {
   const int64_t D = x.size(2), H = x.size(3), W = x.size(4);
+  TORCH_CHECK(skip.size(1) == layer.bias.size(0) && skip.size(2) == 2 * D && skip.size(3) == 2 * H && skip.size(4) == 2 * W,
+              "fast MVSNet: skip connection of the wrong shape");
   auto padded = at::constant_pad_nd(x, {0, 1, 0, 1, 0, 1}, 0);
-  auto out = torch::empty({x.size(0), layer.bias.size(0), 2 * D, 2 * H, 2 * W}, x.options());
   for (int k = 0; k < 8; ++k) {
     // A 1-tap dimension gives one output too many over the padded input: cut it.
     auto y = onednn_conv3d(padded, layer.weight[k], layer.bias, 1, {0, 0, 0});
-    out.slice(2, (k >> 2) & 1, 2 * D, 2)
+    skip.slice(2, (k >> 2) & 1, 2 * D, 2)
         .slice(3, (k >> 1) & 1, 2 * H, 2)
         .slice(4, k & 1, 2 * W, 2)
-        .copy_(y.slice(2, 0, D).slice(3, 0, H).slice(4, 0, W));
+        .add_(y.slice(2, 0, D).slice(3, 0, H).slice(4, 0, W).relu_());
   }
-  return out.relu_();
+  return skip;
 }
 
 // out[x] += w0 in[x-1] + w1 in[x] + w2 in[x+1] over one row, zero beyond its ends.
@@ -246,12 +249,9 @@ struct FastMvsNet::FoldedUNet {
     auto c2 = conv_relu(conv_relu(c0, conv[1]), conv[2]);
     auto c4 = conv_relu(conv_relu(c2, conv[3]), conv[4]);
     auto x = conv_relu(conv_relu(c4, conv[5]), conv[6]);
-    x = deconv_relu(x, up[0]).add_(c4);
-    c4 = torch::Tensor();
-    x = deconv_relu(x, up[1]).add_(c2);
-    c2 = torch::Tensor();
-    x = deconv_relu(x, up[2]).add_(c0);
-    c0 = torch::Tensor();
+    x = deconv_relu_add_into(x, up[0], std::move(c4));
+    x = deconv_relu_add_into(x, up[1], std::move(c2));
+    x = deconv_relu_add_into(x, up[2], std::move(c0));
     return single_output_conv3d(x, prob.weight, prob.bias);
   }
 };
