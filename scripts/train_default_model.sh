@@ -72,7 +72,8 @@ start=()
 [ -n "$INIT" ] && start=(--init "$INIT")
 
 resume=()
-if [ -f "$WORK/run/last.pt" ]; then resume=(--resume) start=(); fi
+# (a resume passes the same options, --init included: the run refuses any other)
+if [ -f "$WORK/run/last.pt" ]; then resume=(--resume); fi
 "$UMVS" train "${data[@]}" --val "$val_list" --out "$WORK/run" --width "$WIDTH" --height "$HEIGHT" \
   --num-depth "$NUM_DEPTH" --batch "$BATCH" --device "$DEVICE" --max-minutes "$MAX_MINUTES" --depth-sampling inverse_depth --input-normalization per_image_channel \
   --views-in 3 --views-loss 6 --top-k 3 --preset paper --supervised-weight 0.1 --min-gain 0.25 --max-gain 1.5 \
