@@ -3,7 +3,8 @@
 # trained on, before and after label-free adaptation to the target images themselves (Khot et al.
 # 2019, Table 5 style: ground truth only scores).
 #   models:  new = models/unsup_mvsnet.pt; old = the previous default model (git OLD_REV);
-#            mvsnet = the published MVSNet_pytorch weights (supervised on DTU; ../shared/data)
+#            mvsnet = the published MVSNet_pytorch weights (supervised on DTU; ../shared/data);
+#            candidate = the checkpoint $CANDIDATE (a model in training, before it is shipped)
 #   targets: rendered = held-out `umvs synth` scenes, one per recipe (seeds used nowhere else);
 #            livingroom = ../shared/data/livingroom (5 frames with exact depth);
 #            templeRing = ../shared/data/templeRing (no ground truth: fused points and the share
@@ -46,6 +47,7 @@ checkpoint() {  # model -> path
     old) [ -f "$WORK/models/old.pt" ] || git -C "$repo" show "$OLD_REV:models/unsup_mvsnet.pt" >"$WORK/models/old.pt"
          echo "$WORK/models/old.pt" ;;
     mvsnet) echo "$SHARED/mvsnet_parity/mvsnet_pytorch_d192.pt" ;;
+    candidate) echo "${CANDIDATE:?MODELS has candidate: set CANDIDATE to its checkpoint}" ;;
   esac
 }
 
@@ -153,6 +155,7 @@ label() {
     new) echo "new default (rendered supervised + real photometric)" ;;
     old) echo "old default (photometric only)" ;;
     mvsnet) echo "MVSNet_pytorch weights (DTU-supervised)" ;;
+    candidate) echo "candidate ($CANDIDATE)" ;;
   esac
 }
 
