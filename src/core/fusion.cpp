@@ -151,7 +151,8 @@ PointCloud make_points_cpu(const Prepared& p, const torch::Tensor& keep, const t
   const int64_t n = keep_c.sum().item<int64_t>();
   PointCloud cloud;
   if (n == 0) return cloud;
-  // world = R^T (d K^-1 (x, y, 1) - t)
+  // world = R^T (d K^-1 (x, y, 1) - t), with K^-1 formed once (Camera::backproject inverts K
+  // per call, too slow for every pixel).
   const Eigen::Matrix3d Rt = p.camera.R().transpose();
   const Eigen::Matrix3d M = Rt * p.camera.K.inverse();
   const Eigen::Vector3d c = -(Rt * p.camera.t());
@@ -626,23 +627,8 @@ void for_each_reference(const std::vector<FusionView>& views, const std::vector<
     for (int j : src) src_views.push_back(&prepared[j]);
     accumulate(ref, src_views, config, count, depth_sum);
     const double consistency_seconds = seconds_since(t_check);
-    torch::Tensor keep, mean_depth;
-    if (device.is_cpu()) {  // (one pass instead of four tensor operations)
-      keep = torch::empty(count.sizes(), torch::kBool);
-      mean_depth = torch::empty(count.sizes(), torch::kFloat32);
-      const bool* valid = ref.valid.data_ptr<bool>();
-      const int32_t* n = count.data_ptr<int32_t>();
-      const float* sum = depth_sum.data_ptr<float>();
-      bool* k = keep.data_ptr<bool>();
-      float* mean = mean_depth.data_ptr<float>();
-      for (int64_t p = 0; p < count.numel(); ++p) {
-        k[p] = valid[p] && n[p] >= config.min_agreeing_views;
-        mean[p] = sum[p] / static_cast<float>(n[p] + 1);
-      }
-    } else {
-      keep = ref.valid & (count >= config.min_agreeing_views);
-      mean_depth = depth_sum / (count + 1).to(torch::kFloat32);
-    }
+    auto keep = ref.valid & (count >= config.min_agreeing_views);
+    auto mean_depth = depth_sum / (count + 1).to(torch::kFloat32);
     per_view(i, ReferenceResult{&ref, static_cast<int>(src.size()), keep, mean_depth, count, ranking_seconds,
                                 consistency_seconds});
   }
