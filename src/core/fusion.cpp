@@ -83,26 +83,8 @@ Prepared prepare(const FusionView& v, const FusionConfig& config, const torch::D
   p.color = v.color.defined() ? v.color.to(device)
                               : torch::full({depth.size(0), depth.size(1), 3}, 128,
                                             torch::TensorOptions().dtype(torch::kUInt8).device(device));
-  if (device.is_cpu() && config.source_rule == FusionSourceRule::kConfidentNeighbours) {
-    // One pass instead of a dozen tensor operations (they dominate at robot-sized maps).
-    depth = depth.contiguous();
-    p.confidence = p.confidence.contiguous();
-    p.valid = torch::empty(depth.sizes(), torch::kBool);
-    p.depth = torch::empty_like(depth);
-    const float* d = depth.data_ptr<float>();
-    const float* c = p.confidence.data_ptr<float>();
-    bool* ok = p.valid.data_ptr<bool>();
-    float* out = p.depth.data_ptr<float>();
-    const float min_confidence = static_cast<float>(config.min_confidence);  // (as the tensor comparison)
-    for (int64_t i = 0; i < depth.numel(); ++i) {
-      ok[i] = std::isfinite(d[i]) && d[i] > 0 && c[i] >= min_confidence;
-      out[i] = ok[i] ? d[i] : 0.0f;
-    }
-    p.source_depth = p.depth;
-    p.quad_valid = quad_validity(p.valid);
-    return p;
-  }
   p.valid = valid_estimate_mask(depth, p.confidence, config.min_confidence);
+  if (device.is_cpu() && config.source_rule == FusionSourceRule::kConfidentNeighbours) p.quad_valid = quad_validity(p.valid);
   p.depth = torch::where(p.valid, depth, torch::zeros_like(depth));
   p.source_depth = p.depth;
   if (config.source_rule == FusionSourceRule::kMvsnetEval) {
