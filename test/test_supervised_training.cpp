@@ -374,6 +374,30 @@ TEST(SelfTraining, UmvsTrainReadsNoGroundTruth) {
 namespace umvs {
 namespace {
 
+TEST(AdaptationJudge, FindsEvidenceOnSparseViewsAndRanksWorseDepthLower) {
+  // Each reference is checked against only two other views, as with a robot's far-apart
+  // keyframes. The judge still confirms a share of the trained model's depth above the trainer
+  // node's 1 % evidence floor, and far less of the depth of the same network untrained.
+  const std::string dir = write_room("judge_sparse", 43, false);
+  TupleConfig cfg;
+  cfg.views_loss = 2;
+  cfg.width = 128;
+  cfg.height = 96;
+  MvsFolderSource source({dir}, cfg);
+  std::vector<TrainingTuple> tuples;
+  for (size_t i = 0; i < source.size(); ++i) tuples.push_back(source.tuple(i, nullptr));
+  auto trained = load_model(default_model(), torch::kCPU).model;
+  torch::manual_seed(1);
+  MvsNet untrained(trained->config());
+  const FusionConfig judge = adaptation_judge_rule();
+  const double trained_share = depth_consistency(trained, tuples, 32, judge, torch::kCPU).confirmed_fraction;
+  const double untrained_share = depth_consistency(untrained, tuples, 32, judge, torch::kCPU).confirmed_fraction;
+  RecordProperty("trained_share", std::to_string(trained_share));
+  RecordProperty("untrained_share", std::to_string(untrained_share));
+  EXPECT_GT(trained_share, 0.01);
+  EXPECT_GT(trained_share, 3 * untrained_share) << "untrained " << untrained_share;
+}
+
 TEST(DefaultModel, DepthIgnoresExposure) {
   // A camera recording everything at 0.3x brightness (quantised to 8 bits like a real dark
   // camera) gets the same depth from the shipped model: median change < 1 %.

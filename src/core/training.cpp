@@ -368,6 +368,15 @@ ConsistencyScore depth_consistency(MvsNet& model, const std::vector<TrainingTupl
   return score;
 }
 
+FusionConfig adaptation_judge_rule() {
+  FusionConfig rule;
+  rule.min_confidence = 0.5;
+  rule.max_reprojection_px = 1.0;
+  rule.max_relative_depth = 0.01;
+  rule.min_agreeing_views = 1;
+  return rule;
+}
+
 std::vector<TrainingTuple> pseudo_labelled_tuples(MvsNet& model, const std::vector<TrainingTuple>& tuples,
                                                   int num_depth, const FusionConfig& fusion,
                                                   const torch::Device& device, ConsistencyScore* labelled) {

@@ -456,7 +456,7 @@ EvalRow evaluate_checkpoint(const std::string& checkpoint, const TupleSource& so
   const auto tuples = fixed_tuples(source, max_tuples);
   const Evaluation ev = evaluate_model(loaded.model, tuples, config, device);
   // Label-free judge besides the photometric loss: the share of depth that other views confirm.
-  const ConsistencyScore consistency = depth_consistency(loaded.model, tuples, config.num_depth, FusionConfig(), device);
+  const ConsistencyScore consistency = depth_consistency(loaded.model, tuples, config.num_depth, adaptation_judge_rule(), device);
   EvalRow row;
   row.checkpoint = checkpoint;
   row.tuples = ev.tuples;

@@ -166,6 +166,13 @@ struct ConsistencyScore {
 ConsistencyScore depth_consistency(MvsNet& model, const std::vector<TrainingTuple>& tuples, int num_depth,
                                    const FusionConfig& fusion, const torch::Device& device);
 
+// The rule that judges an adapted model without labels (eval.csv's `consistent`, hence the trainer
+// node's reload decision): a reference pixel counts when at least one other view confirms it within
+// fusion's 1 px / 1 % thresholds, at the fusion node's default confidence (0.5). A robot's keyframes
+// are often far apart: demanding three confirming views gave every model 0 % on the living room's
+// five frames (docs/results.md), which is no evidence either way.
+FusionConfig adaptation_judge_rule();
+
 // Self-training labels: each tuple's reference depth where depth_consistency's rule confirms it
 // (several views agree within the fusion thresholds, confident), as depth_gt on the input grid
 // (0 elsewhere), marked supervised; one output per input tuple (one without a confirmed pixel
