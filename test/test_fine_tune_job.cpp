@@ -201,6 +201,8 @@ TEST(FineTuneDecision, ReloadsOnlyWhenBothScoresAreBetterAndEnoughDepthIsConfirm
   EXPECT_FALSE(decide_reload({0.10, 0.20}, {0.12, 0.25}).reload) << "photometric better, consistency worse";
   EXPECT_FALSE(decide_reload({0.13, 0.30}, {0.12, 0.25}).reload) << "consistency better, photometric worse";
   EXPECT_FALSE(decide_reload({0.12, 0.30}, {0.12, 0.25}).reload) << "photometric equal";
+  EXPECT_FALSE(decide_reload({0.1195, 0.30}, {0.12, 0.25}).reload) << "photometric lower by 0.4 %: within noise";
+  EXPECT_TRUE(decide_reload({0.1185, 0.30}, {0.12, 0.25}).reload) << "photometric lower by 1.25 %";
   EXPECT_FALSE(decide_reload({0.10, 0.009}, {0.12, 0.005}).reload) << "under the 1% floor";
   EXPECT_TRUE(decide_reload({0.10, 0.01}, {0.12, 0.005}).reload) << "at the floor";
   EXPECT_EQ(decide_reload({0.10, 0.009}, {0.12, 0.005}).comparison,

@@ -96,7 +96,8 @@ ReloadVerdict decide_reload(const EvalScores& candidate, const EvalScores& serve
       << "; multi-view consistent depth: new " << 100.0 * candidate.consistent << "%, served "
       << 100.0 * served.consistent << "%";
   v.comparison = cmp.str();
-  v.reload = candidate.photometric < served.photometric && candidate.consistent > served.consistent &&
+  v.reload = candidate.photometric < (1.0 - kMinPhotometricGain) * served.photometric &&
+             candidate.consistent > served.consistent &&
              candidate.consistent >= kMinConsistentShare;
   return v;
 }
