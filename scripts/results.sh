@@ -9,9 +9,11 @@
 #            livingroom = ../shared/data/livingroom (5 frames with exact depth);
 #            templeRing = ../shared/data/templeRing (no ground truth: fused points and the share
 #            inside the bounding box, 640x480, D = 128, `umvs fuse` defaults)
-#   adaptation: "photometric" = STEPS of `umvs train` (robust loss) on the target images;
-#               "self-training" = the same with --self-training-every (labels: the model's own
-#               multi-view consistent depth; no ground truth read).
+#   adaptation: "photometric" = STEPS of `umvs train` (robust loss) on the target images at
+#               320x256, D = 64 (the trainer node's size); "self" = the same with
+#               --self-training-every (labels: the model's own multi-view consistent depth; no
+#               ground truth read); "aggressive" (10x the learning rate), "loose_self" (self-training
+#               on loose labels) and "long" (4x the steps): mistakes the reload rule must turn down.
 # Each cell: mean abs err (m) / abs rel / within 1 % (%); templeRing: points / % inside the box.
 #
 # Usage: scripts/results.sh [WORK_DIR]
@@ -67,7 +69,8 @@ rendered=$(IFS=,; echo "${rendered_dirs[*]}")
   "$UMVS" import middlebury --data "$SHARED/templeRing" --out "$WORK/data/templeRing" >/dev/null
 TEMPLE_BBOX=-0.023121,-0.038009,-0.091940,0.078626,0.121636,-0.017395
 
-# Per target: evaluation set-up, and fine-tuning set-up (the default model's training size).
+# Per target: evaluation set-up, and fine-tuning set-up (the size the default model's last stage
+# trained at and the trainer node's train_args: 320x256, D = 64).
 eval_args() {
   case "$1" in
     rendered) echo "--data $rendered --width 320 --height 256 --num-depth 64 --views-loss 4 --top-k 3 --val-tuples $EVAL_TUPLES" ;;
@@ -76,15 +79,25 @@ eval_args() {
 }
 tune_args() {
   case "$1" in
-    rendered) echo "--data $rendered --width 160 --height 128 --num-depth 32 --views-loss 4 --top-k 3" ;;
-    livingroom) echo "--data $WORK/data/livingroom --width 160 --height 128 --num-depth 32 --views-loss 3 --top-k 2" ;;
-    templeRing) echo "--data $WORK/data/templeRing --width 160 --height 128 --num-depth 32 --views-loss 6 --top-k 3" ;;
+    rendered) echo "--data $rendered --width 320 --height 256 --num-depth 64 --views-loss 4 --top-k 3" ;;
+    livingroom) echo "--data $WORK/data/livingroom --width 320 --height 256 --num-depth 64 --views-loss 3 --top-k 2" ;;
+    templeRing) echo "--data $WORK/data/templeRing --width 320 --height 256 --num-depth 64 --views-loss 6 --top-k 3" ;;
   esac
 }
 adapt_args() {
   case "$1" in
     photometric) echo "" ;;
     self) echo "--self-training-every 25" ;;
+    # Adaptations a user could run by mistake, to check that the reload rule turns them down:
+    aggressive) echo "--lr 1e-2" ;;  # ten times the learning rate
+    loose_self) echo "--self-training-every 25 --label-max-relative-depth 0.3 --label-min-views 1 --label-min-confidence 0" ;;
+    long) echo "" ;;                 # photometric, 4 x STEPS on the same few images
+  esac
+}
+adapt_steps() {
+  case "$1" in
+    long) echo $((4 * STEPS)) ;;
+    *) echo "$STEPS" ;;
   esac
 }
 
@@ -96,11 +109,13 @@ adapted() {
   if [ "$adapt" = none ]; then echo "$ckpt"; return; fi
   local out="$WORK/ft/${model}_${adapt}_$target"
   if [ ! -f "$out/last.pt" ]; then
-    echo "[results] $adapt adaptation of $model on $target ($STEPS steps)" >&2
+    local steps
+    steps=$(adapt_steps "$adapt")
+    echo "[results] $adapt adaptation of $model on $target ($steps steps)" >&2
     rm -rf "$out"
     # shellcheck disable=SC2046
-    "$UMVS" train $(tune_args "$target") $(adapt_args "$adapt") --init "$ckpt" --steps "$STEPS" \
-      --save-every "$STEPS" --threads "$THREADS" --out "$out" >"$out.log" 2>&1 ||
+    "$UMVS" train $(tune_args "$target") $(adapt_args "$adapt") --init "$ckpt" --steps "$steps" \
+      --save-every "$steps" --threads "$THREADS" --out "$out" >"$out.log" 2>&1 ||
       { echo "[results] failed, see $out.log" >&2; return 1; }
   fi
   echo "$out/last.pt"
@@ -141,12 +156,20 @@ judge() {
   [ -f "$before" ] && [ -f "$after" ] || return 0
   awk -F, -v what="$(label "$1"), $2" -v target="$3" '
     FNR == 1 { for (i = 1; i <= NF; ++i) col[$i] = i; next }
-    NR == FNR { r0 = $col["abs_rel"]; p0 = $col["photometric"]; c0 = $col["consistent"]; next }
-    { r1 = $col["abs_rel"]; p1 = $col["photometric"]; c1 = $col["consistent"] }
+    NR == FNR { e0 = $col["abs_err"]; r0 = $col["abs_rel"]; w0 = $col["within_1pct"]
+                p0 = $col["photometric"]; c0 = $col["consistent"]; next }
+    { e1 = $col["abs_err"]; r1 = $col["abs_rel"]; w1 = $col["within_1pct"]; p1 = $col["photometric"]; c1 = $col["consistent"] }
     END {
-      accept = (p1 < p0 && c1 > c0 && c1 >= 0.01); better = (r1 < r0)  # as the trainer node: 1 % evidence floor
-      printf "| %s | %s | %.3f -> %.3f | %.4f -> %.4f | %.1f%% -> %.1f%% | %s | %s |\n", what, target, r0, r1, p0, p1,
-             100 * c0, 100 * c1, accept ? "reload" : "keep", (accept == better) ? "yes" : "no"
+      # As the trainer node (decide_reload): photometric at least 1 % lower, consistency higher and >= 1 %.
+      accept = (p1 < 0.99 * p0 && c1 > c0 && c1 >= 0.01)
+      improved = (e1 < e0) + (r1 < r0) + (w1 > w0)  # of the three ground-truth scores
+      depth = improved == 3 ? "better" : improved == 0 ? "worse" : "mixed"
+      if (depth == "mixed") right = "mixed"
+      else if (accept) right = depth == "better" ? "yes" : "**no: served worse depth**"
+      else right = depth == "worse" ? "yes" : "no: kept the worse model"
+      printf "| %s | %s | %.3f / %.3f / %.1f -> %.3f / %.3f / %.1f (%s) | %.4f -> %.4f | %.1f%% -> %.1f%% | %s | %s |\n",
+             what, target, e0, r0, 100 * w0, e1, r1, 100 * w1, depth, p0, p1, 100 * c0, 100 * c1,
+             accept ? "reload" : "keep", right
     }' "$before" "$after"
 }
 
@@ -171,10 +194,11 @@ start=$(date +%s)
   done
   echo
   echo "The label-free reload rule (trainer node): accept an adapted model only when its held-out photometric"
-  echo "loss is lower AND its multi-view consistency higher (and at least 1 %) than the model it replaces; checked against the"
-  echo "ground truth it never sees (abs rel before -> after):"
+  echo "loss is at least 1 % lower AND its multi-view consistency higher (and at least 1 %) than the model it replaces;"
+  echo "checked against the ground truth it never sees (mean abs err / abs rel / within 1 %, before -> after; better or"
+  echo "worse on all three, else mixed):"
   echo
-  echo "| adaptation | target | abs rel before -> after | photometric before -> after | consistent before -> after | rule | right? |"
+  echo "| adaptation | target | ground truth before -> after | photometric before -> after | consistent before -> after | rule | right? |"
   echo "|---|---|---|---|---|---|---|"
   for model in $MODELS; do
     for adapt in $ADAPT; do
