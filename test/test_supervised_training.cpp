@@ -18,6 +18,7 @@
 #include "unsup_mvs/io/checkpoint.h"
 #include "unsup_mvs/io/synth_writer.h"
 #include "unsup_mvs/io/training_data.h"
+#include "unsup_mvs/io/training_run.h"
 
 namespace umvs {
 namespace {
@@ -383,9 +384,7 @@ TEST(AdaptationJudge, FindsEvidenceOnSparseViewsAndRanksWorseDepthLower) {
   cfg.views_loss = 2;
   cfg.width = 128;
   cfg.height = 96;
-  MvsFolderSource source({dir}, cfg);
-  std::vector<TrainingTuple> tuples;
-  for (size_t i = 0; i < source.size(); ++i) tuples.push_back(source.tuple(i, nullptr));
+  const auto tuples = fixed_tuples(MvsFolderSource({dir}, cfg), 0);  // all, unaugmented
   auto trained = load_model(default_model(), torch::kCPU).model;
   torch::manual_seed(1);
   MvsNet untrained(trained->config());
