@@ -17,7 +17,8 @@
 #   environment: UMVS, STEPS (6000), THREADS (2), SEED (1), SCENES_PER_RECIPE (8), TEXTURES
 #   (installed | DIR[,DIR] | none), DEVICE (cpu | cuda), WIDTH x HEIGHT, NUM_DEPTH (160 x 128, 32),
 #   BATCH (1), INIT (start from this checkpoint instead of random weights), MAX_MINUTES (0: none),
-#   RENDER_JOBS (scenes rendered at once, 1), LR (1e-3), LR_SCHEDULE (constant | cosine), LR_MIN (0)
+#   RENDER_JOBS (scenes rendered at once, 1), LR (1e-3), LR_SCHEDULE (constant | cosine), LR_MIN (0),
+#   FEATURE_WARP (exact; mvsnet_pytorch only to reproduce models trained before the warp was fixed)
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
@@ -38,6 +39,7 @@ MAX_MINUTES="${MAX_MINUTES:-0}"
 LR="${LR:-1e-3}"
 LR_SCHEDULE="${LR_SCHEDULE:-constant}"
 LR_MIN="${LR_MIN:-0}"
+FEATURE_WARP="${FEATURE_WARP:-exact}"
 SHARED="${UMVS_SHARED_DATA:-$here/../../shared/data}"
 
 [ -x "$UMVS" ] || { echo "umvs not found at $UMVS (set UMVS=/path/to/umvs)" >&2; exit 1; }
@@ -76,6 +78,7 @@ resume=()
 if [ -f "$WORK/run/last.pt" ]; then resume=(--resume); fi
 "$UMVS" train "${data[@]}" --val "$val_list" --out "$WORK/run" --width "$WIDTH" --height "$HEIGHT" \
   --num-depth "$NUM_DEPTH" --batch "$BATCH" --device "$DEVICE" --max-minutes "$MAX_MINUTES" --depth-sampling inverse_depth --input-normalization per_image_channel \
+  --feature-warp "$FEATURE_WARP" \
   --views-in 3 --views-loss 6 --top-k 3 --preset paper --supervised-weight 0.1 --min-gain 0.25 --max-gain 1.5 \
   --lr "$LR" --lr-schedule "$LR_SCHEDULE" --lr-min "$LR_MIN" --steps "$STEPS" --save-every 500 --val-tuples 15 --seed "$SEED" --threads "$THREADS" "${start[@]}" "${resume[@]}"
 echo "[default-model] done: $WORK/run/last.pt (copy it to models/unsup_mvsnet.pt)"

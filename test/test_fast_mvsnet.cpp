@@ -130,8 +130,8 @@ TEST(Threads, ParallelLoopsOfThisLibraryRunOnTheThreadsAsked) {
 
 TEST(FastPath, CostVolumeMatchesTheWarpedVolumes) {
   // variance_cost_volume against its definition: mean of squares minus square of the mean over
-  // the reference and the homography-warped sources. The third view (x and z swapped) sees part
-  // of the reference frustum behind it or on its camera plane.
+  // the reference and the homography-warped sources, for both feature warps. The third view
+  // (x and z swapped) sees part of the reference frustum behind it or on its camera plane.
   torch::manual_seed(3);
   const int64_t C = 5, H = 6, W = 8, D = 4;
   auto features = torch::randn({1, 3, C, H, W});
@@ -139,26 +139,33 @@ TEST(FastPath, CostVolumeMatchesTheWarpedVolumes) {
   auto swapped = torch::tensor({0.f, 0.f, 1.f, 0.f, 0.f, 1.f, 0.f, 0.f, 1.f, 0.f, 0.f, 0.f, 0.f, 0.f, 0.f, 1.f}).view({4, 4});
   auto proj = torch::stack({mvsnet_projection_matrix(cams[0]), mvsnet_projection_matrix(cams[1]), swapped}).unsqueeze(0);
   auto dv = depth_hypotheses(1.0, 2.0, D, DepthSampling::kUniformDepth).unsqueeze(0);
-  auto sum = features.select(1, 0).unsqueeze(2).repeat({1, 1, D, 1, 1});
-  auto sq = sum.pow(2);
-  for (int v = 1; v < 3; ++v) {
-    auto w = homography_warp(features.select(1, v), proj.select(1, v), proj.select(1, 0), dv);
-    sum = sum + w;
-    sq = sq + w.pow(2);
+  torch::Tensor volumes[2];
+  for (const FeatureWarp warp : {FeatureWarp::kExact, FeatureWarp::kMvsNetPytorch}) {
+    SCOPED_TRACE(to_string(warp));
+    auto sum = features.select(1, 0).unsqueeze(2).repeat({1, 1, D, 1, 1});
+    auto sq = sum.pow(2);
+    for (int v = 1; v < 3; ++v) {
+      auto w = homography_warp(features.select(1, v), proj.select(1, v), proj.select(1, 0), dv, warp);
+      sum = sum + w;
+      sq = sq + w.pow(2);
+    }
+    auto expected = sq / 3.0 - (sum / 3.0).pow(2);
+    auto volume = variance_cost_volume(features, proj, dv, warp);
+    ASSERT_EQ(volume.sizes(), expected.sizes());
+    // A range of planes, with a zero plane on either side beyond the volume.
+    auto slab = VarianceCostVolume(features, proj, dv, warp).planes(-1, 2);
+    EXPECT_TRUE(torch::equal(slab.slice(2, 1, 3), volume.slice(2, 0, 2)));
+    EXPECT_EQ(slab.select(2, 0).abs().max().item<float>(), 0.0f);
+    EXPECT_EQ(VarianceCostVolume(features, proj, dv, warp).planes(D, D + 1).abs().max().item<float>(), 0.0f);
+    EXPECT_TRUE(torch::isfinite(volume).all().item<bool>());
+    const double err = (volume - expected).abs().max().item<double>();
+    std::cout << "[fast path] " << to_string(warp) << " cost volume max abs diff " << err << " (values up to "
+              << expected.abs().max().item<double>() << ")\n";
+    EXPECT_LT(err, 1e-5);
+    volumes[warp == FeatureWarp::kExact ? 0 : 1] = volume;
   }
-  auto expected = sq / 3.0 - (sum / 3.0).pow(2);
-  auto volume = variance_cost_volume(features, proj, dv);
-  ASSERT_EQ(volume.sizes(), expected.sizes());
-  // A range of planes, with a zero plane on either side beyond the volume.
-  auto slab = VarianceCostVolume(features, proj, dv).planes(-1, 2);
-  EXPECT_TRUE(torch::equal(slab.slice(2, 1, 3), volume.slice(2, 0, 2)));
-  EXPECT_EQ(slab.select(2, 0).abs().max().item<float>(), 0.0f);
-  EXPECT_EQ(VarianceCostVolume(features, proj, dv).planes(D, D + 1).abs().max().item<float>(), 0.0f);
-  EXPECT_TRUE(torch::isfinite(volume).all().item<bool>());
-  const double err = (volume - expected).abs().max().item<double>();
-  std::cout << "[fast path] cost volume max abs diff " << err << " (values up to " << expected.abs().max().item<double>()
-            << ")\n";
-  EXPECT_LT(err, 1e-5);
+  // The two warps sample different places.
+  EXPECT_GT((volumes[0] - volumes[1]).abs().max().item<double>(), 1e-2);
 }
 
 TEST(FastPath, RefinementAndStageTimes) {

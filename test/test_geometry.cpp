@@ -38,11 +38,14 @@ TEST(HomographyWarp, IdenticalCamerasReturnTheFeatures) {
   auto fea = torch::rand({1, 4, 12, 16});
   auto P = mvsnet_projection_matrix(camera_at(0.0)).unsqueeze(0);
   auto dv = depth_hypotheses(1.0, 5.0, 8, DepthSampling::kUniformDepth).unsqueeze(0);
-  auto warped = homography_warp(fea, P, P, dv);
+  auto warped = homography_warp(fea, P, P, dv, FeatureWarp::kExact);
   ASSERT_EQ(warped.sizes(), (std::vector<int64_t>{1, 4, 8, 12, 16}));
-  // MVSNet's (W-1)/2 normalisation with align_corners=false shifts samples by up to half a pixel
-  // towards the border, so compare only the exact centre, and check the warp is depth-independent.
-  EXPECT_LT((warped.select(2, 0) - warped.select(2, 7)).abs().max().item<double>(), 1e-6);
+  for (int d = 0; d < 8; ++d) EXPECT_LT((warped.select(2, d) - fea).abs().max().item<double>(), 1e-5) << "plane " << d;
+  // MVSNet_pytorch's warp reads up to half a pixel off towards the borders: the features come
+  // back blurred and shifted, the same for every plane.
+  auto legacy = homography_warp(fea, P, P, dv, FeatureWarp::kMvsNetPytorch);
+  EXPECT_GT((legacy.select(2, 0) - fea).abs().max().item<double>(), 0.05);
+  EXPECT_LT((legacy.select(2, 0) - legacy.select(2, 7)).abs().max().item<double>(), 1e-6);
 }
 
 TEST(HomographyWarp, FrontoParallelPlaneShiftsByDisparity) {
@@ -53,14 +56,19 @@ TEST(HomographyWarp, FrontoParallelPlaneShiftsByDisparity) {
   auto dv8 = dv.expand({1, 8}).contiguous();
   // A horizontal ramp image: the warped value tells where the sample came from.
   auto ramp = torch::arange(W / 4, torch::kFloat32).view({1, 1, 1, W / 4}).expand({1, 1, H / 4, W / 4}).contiguous();
-  auto warped = homography_warp(ramp, mvsnet_projection_matrix(src).unsqueeze(0), mvsnet_projection_matrix(ref).unsqueeze(0), dv8);
+  const auto warp = [&](FeatureWarp w) {
+    return homography_warp(ramp, mvsnet_projection_matrix(src).unsqueeze(0), mvsnet_projection_matrix(ref).unsqueeze(0), dv8, w);
+  };
   const double disparity = 50.0 / 4 * 0.2 / 2.5;  // feature-resolution focal length * b / z = 1 px
-  // Centre pixel of row 6: source x = x - disparity. grid_sample(align_corners=false) with the
-  // (W-1)/2 normalisation reads at x' = x * w/(w-1) - 0.5, exactly as MVSNet_pytorch on torch>=1.3.
   const int w = W / 4;
+  // Every pixel of row 6 whose source lies inside: exact reads at x - disparity.
+  auto exact = warp(FeatureWarp::kExact);
+  for (int x = 2; x < w; ++x) EXPECT_NEAR(exact[0][0][0][6][x].item<double>(), x - disparity, 1e-4) << "x " << x;
+  // grid_sample(align_corners=false) with the (W-1)/2 normalisation reads at x' = x * w/(w-1) - 0.5,
+  // exactly as MVSNet_pytorch on torch>=1.3.
+  auto legacy = warp(FeatureWarp::kMvsNetPytorch);
   const double x = 8, xs = x - disparity;
-  const double expected = xs * w / (w - 1.0) - 0.5;
-  EXPECT_NEAR(warped[0][0][0][6][8].item<double>(), expected, 1e-4);
+  EXPECT_NEAR(legacy[0][0][0][6][8].item<double>(), xs * w / (w - 1.0) - 0.5, 1e-4);
 }
 
 TEST(HomographyWarp, PointsOnTheSourceCameraPlaneSampleNothingInsteadOfNaN) {
@@ -70,9 +78,11 @@ TEST(HomographyWarp, PointsOnTheSourceCameraPlaneSampleNothingInsteadOfNaN) {
   auto ref = torch::eye(4).unsqueeze(0);
   auto src = torch::tensor({0.f, 0.f, 1.f, 0.f, 0.f, 1.f, 0.f, 0.f, 1.f, 0.f, 0.f, 0.f, 0.f, 0.f, 0.f, 1.f}).view({1, 4, 4});
   auto dv = depth_hypotheses(1.0, 2.0, 4, DepthSampling::kUniformDepth).unsqueeze(0);
-  auto warped = homography_warp(fea, src, ref, dv);
-  EXPECT_TRUE(torch::isfinite(warped).all().item<bool>());
-  EXPECT_EQ(warped.select(4, 0).abs().max().item<float>(), 0.0f);  // out of view: zero padding
+  for (const FeatureWarp warp : {FeatureWarp::kExact, FeatureWarp::kMvsNetPytorch}) {
+    auto warped = homography_warp(fea, src, ref, dv, warp);
+    EXPECT_TRUE(torch::isfinite(warped).all().item<bool>());
+    EXPECT_EQ(warped.select(4, 0).abs().max().item<float>(), 0.0f);  // out of view: zero padding
+  }
 }
 
 TEST(InverseWarp, RecoversTheReferenceFromATranslatedView) {

@@ -219,6 +219,7 @@ TEST(Checkpoint, RoundTripAndMismatchIsNamed) {
   MvsNetConfig cfg;
   cfg.num_depth = 32;
   cfg.depth_sampling = DepthSampling::kUniformInverseDepth;
+  cfg.feature_warp = FeatureWarp::kMvsNetPytorch;
   torch::manual_seed(3);
   MvsNet net(cfg);
   CheckpointMeta meta;
@@ -230,12 +231,26 @@ TEST(Checkpoint, RoundTripAndMismatchIsNamed) {
   EXPECT_EQ(loaded.format, "unsup_mvs");
   EXPECT_EQ(loaded.model->config().num_depth, 32);
   EXPECT_EQ(loaded.model->config().depth_sampling, DepthSampling::kUniformInverseDepth);
+  EXPECT_EQ(loaded.model->config().feature_warp, FeatureWarp::kMvsNetPytorch);
   EXPECT_EQ(loaded.meta.step, 42);
   EXPECT_EQ(loaded.meta.optimizer_state, meta.optimizer_state);
   EXPECT_DOUBLE_EQ(loaded.meta.metrics.at("val_loss"), 0.25);
   auto p1 = net->named_parameters()["cost_regularization.conv3.conv.weight"];
   auto p2 = loaded.model->named_parameters()["cost_regularization.conv3.conv.weight"];
   EXPECT_TRUE(torch::equal(p1, p2));
+  net->set_feature_warp(FeatureWarp::kExact);
+  save_checkpoint(dir + "/exact.pt", net, meta);
+  EXPECT_EQ(load_model(dir + "/exact.pt", torch::kCPU).model->config().feature_warp, FeatureWarp::kExact);
+  // A checkpoint written before the field existed was trained with MVSNet_pytorch's warp.
+  {
+    std::ifstream in(dir + "/exact.pt", std::ios::binary);
+    const std::vector<char> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    auto root = torch::pickle_load(bytes).toGenericDict();
+    root.at("config").toGenericDict().erase("feature_warp");
+    const std::vector<char> old = torch::pickle_save(c10::IValue(root));
+    std::ofstream(dir + "/old.pt", std::ios::binary).write(old.data(), static_cast<std::streamsize>(old.size()));
+  }
+  EXPECT_EQ(load_model(dir + "/old.pt", torch::kCPU).model->config().feature_warp, FeatureWarp::kMvsNetPytorch);
 
   MvsNetConfig want_refine = cfg;
   want_refine.refine = true;

@@ -85,6 +85,29 @@ TEST_P(Parity, NetworkMatchesReference) {
 
 INSTANTIATE_TEST_SUITE_P(MvsNetPytorch, Parity, ::testing::Values("parity_small", "parity_full", "parity_livingroom"));
 
+// The exact feature warp against the reference run with grid_sample(align_corners = true), the
+// sampling its (W-1)/2 grid normalisation was written for (parity_small's extra arrays).
+TEST(ExactWarpParity, MatchesTheReferenceRunWithAlignCorners) {
+  UMVS_REQUIRE_SHARED("mvsnet_parity/parity_small", dir);
+  torch::set_num_threads(2);
+  auto model = load_model(test::shared_data_dir() + "/mvsnet_parity/mvsnet_pytorch_d192.pt", torch::kCPU);
+  EXPECT_EQ(model.model->config().feature_warp, FeatureWarp::kMvsNetPytorch);
+  model.model->set_feature_warp(FeatureWarp::kExact);
+  const CaseData c = load_case(dir);
+  const auto depth = read_npy(dir + "/depth_aligncorners_true.npy");
+  const auto confidence = read_npy(dir + "/photometric_confidence_aligncorners_true.npy");
+  torch::NoGradGuard no_grad;
+  FastMvsNet fast(model.model);
+  for (const bool use_fast : {false, true}) {
+    const std::string name = std::string("parity_small exact warp, ") + (use_fast ? "fast path" : "autograd path");
+    auto out = use_fast ? fast.forward(c.imgs, c.proj, c.depth_values) : model.model->forward(c.imgs, c.proj, c.depth_values);
+    report(name + " depth", out.depth, depth, 1e-4, 0.0, 0.999);
+    report(name + " confidence", out.confidence, confidence, 0.0, 1e-4, 0.999);
+    // ... and it is not the default warp's result.
+    EXPECT_LT(test::fraction_close(out.depth, c.depth, 1e-4, 0.0), 0.9) << name;
+  }
+}
+
 // The same numbers through `umvs infer` on an MVSNet-format folder made from the case.
 class InferParity : public ::testing::TestWithParam<std::string> {};
 

@@ -277,7 +277,7 @@ MvsOutput FastMvsNet::forward(const torch::Tensor& images, const torch::Tensor& 
   auto t0 = Clock::now();
   auto features = model_->view_features(images);
   t.features = lap(t0);
-  const VarianceCostVolume volume(features, proj, depth_values);
+  const VarianceCostVolume volume(features, proj, depth_values, model_->config().feature_warp);
   features = torch::Tensor();
   t.cost_volume = lap(t0);
   double volume_seconds = 0;
@@ -296,7 +296,8 @@ MvsOutput FastMvsNet::forward(const torch::Tensor& images, const torch::Tensor& 
 }
 
 VarianceCostVolume::VarianceCostVolume(const torch::Tensor& features, const torch::Tensor& proj,
-                                       const torch::Tensor& depth_values) {
+                                       const torch::Tensor& depth_values, FeatureWarp warp)
+    : warp_(warp) {
   TORCH_CHECK(features.dim() == 5 && features.device().is_cpu() && features.scalar_type() == torch::kFloat32,
               "variance_cost_volume: features must be float32 [B,V,C,h,w] on the CPU, got ", features.sizes());
   B_ = features.size(0), V_ = features.size(1), C_ = features.size(2), H_ = features.size(3), W_ = features.size(4);
@@ -322,9 +323,13 @@ torch::Tensor VarianceCostVolume::planes(int64_t begin, int64_t end) const {
   const float* fea_p = features_.data_ptr<float>();
   const float* depth_p = depth_.data_ptr<float>();
   float* volume_p = volume.data_ptr<float>();
-  // The arithmetic of homography_warp + grid_sample (align_corners = false), in the same order.
+  // The arithmetic of homography_warp + ATen's CPU grid_sample, in the same order: a grid
+  // coordinate g maps to the pixel (g + 1) * (W - 1) / 2 with align_corners = true (exact) and to
+  // (g + 1) * W / 2 - 0.5 with align_corners = false (MVSNet_pytorch).
   const float norm_x = static_cast<float>((W - 1) / 2.0), norm_y = static_cast<float>((H - 1) / 2.0);
-  const float half_w = static_cast<float>(W) / 2, half_h = static_cast<float>(H) / 2;
+  const bool exact = warp_ == FeatureWarp::kExact;
+  const float scale_x = exact ? norm_x : static_cast<float>(W) / 2, scale_y = exact ? norm_y : static_cast<float>(H) / 2;
+  const float shift = exact ? 0.0f : 0.5f;
   const float num_views = static_cast<float>(V);
   const std::vector<float> zeros(C, 0.0f);
 
@@ -354,7 +359,7 @@ torch::Tensor VarianceCostVolume::planes(int64_t begin, int64_t end) const {
           float gx = px / pz / norm_x - 1.0f, gy = py / pz / norm_y - 1.0f;
           if (!std::isfinite(gx)) gx = -2.0f;  // a point on the source camera plane: outside
           if (!std::isfinite(gy)) gy = -2.0f;
-          const float ix = (gx + 1.0f) * half_w - 0.5f, iy = (gy + 1.0f) * half_h - 0.5f;
+          const float ix = (gx + 1.0f) * scale_x - shift, iy = (gy + 1.0f) * scale_y - shift;
           const float x_w = std::floor(ix), y_n = std::floor(iy);
           const bool west = x_w > -1 && x_w < W, east = x_w > -2 && x_w < W - 1;
           const bool north = y_n > -1 && y_n < H, south = y_n > -2 && y_n < H - 1;
@@ -383,8 +388,8 @@ torch::Tensor VarianceCostVolume::planes(int64_t begin, int64_t end) const {
 }
 
 torch::Tensor variance_cost_volume(const torch::Tensor& features, const torch::Tensor& proj,
-                                   const torch::Tensor& depth_values) {
-  const VarianceCostVolume volume(features, proj, depth_values);
+                                   const torch::Tensor& depth_values, FeatureWarp warp) {
+  const VarianceCostVolume volume(features, proj, depth_values, warp);
   return volume.planes(0, volume.num_planes());
 }
 

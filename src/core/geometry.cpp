@@ -19,6 +19,14 @@ DepthSampling depth_sampling_from_string(const std::string& s) {
   throw std::invalid_argument("unknown depth sampling '" + s + "' (expected depth|inverse_depth)");
 }
 
+const char* to_string(FeatureWarp w) { return w == FeatureWarp::kExact ? "exact" : "mvsnet_pytorch"; }
+
+FeatureWarp feature_warp_from_string(const std::string& s) {
+  if (s == "exact") return FeatureWarp::kExact;
+  if (s == "mvsnet_pytorch") return FeatureWarp::kMvsNetPytorch;
+  throw std::invalid_argument("unknown feature warp '" + s + "' (expected exact|mvsnet_pytorch)");
+}
+
 torch::Tensor depth_hypotheses(double depth_min, double depth_max, int num_depth,
                                DepthSampling sampling) {
   if (!std::isfinite(depth_min) || !std::isfinite(depth_max) || depth_min <= 0.0 ||
@@ -131,7 +139,7 @@ HomographyRays homography_rays(const torch::Tensor& src_proj, const torch::Tenso
 }
 
 torch::Tensor homography_warp(const torch::Tensor& src_fea, const torch::Tensor& src_proj,
-                              const torch::Tensor& ref_proj, const torch::Tensor& depth_values) {
+                              const torch::Tensor& ref_proj, const torch::Tensor& depth_values, FeatureWarp warp) {
   const int64_t B = src_fea.size(0), C = src_fea.size(1), H = src_fea.size(2), W = src_fea.size(3);
   const int64_t D = depth_values.size(1);
   torch::Tensor sample_grid;
@@ -153,7 +161,7 @@ torch::Tensor homography_warp(const torch::Tensor& src_fea, const torch::Tensor&
                                F::GridSampleFuncOptions()
                                    .mode(torch::kBilinear)
                                    .padding_mode(torch::kZeros)
-                                   .align_corners(false));
+                                   .align_corners(warp == FeatureWarp::kExact));
   return warped.view({B, C, D, H, W});
 }
 

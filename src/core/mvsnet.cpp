@@ -52,7 +52,8 @@ std::string MvsNetConfig::to_string() const {
   std::ostringstream os;
   os << "num_depth=" << num_depth << " depth_sampling=" << umvs::to_string(depth_sampling)
      << " refine=" << (refine ? "true" : "false") << " num_views=" << num_views
-     << " input_normalization=" << umvs::to_string(input_normalization);
+     << " input_normalization=" << umvs::to_string(input_normalization)
+     << " feature_warp=" << umvs::to_string(feature_warp);
   return os.str();
 }
 
@@ -197,7 +198,7 @@ MvsOutput MvsNetImpl::forward(const torch::Tensor& images, const torch::Tensor& 
   auto volume_sum = features.select(1, 0).unsqueeze(2).repeat({1, 1, D, 1, 1});
   auto volume_sq_sum = volume_sum.pow(2);
   for (int64_t v = 1; v < V; ++v) {
-    auto warped = homography_warp(features.select(1, v), proj.select(1, v), ref_proj, depth_values);
+    auto warped = homography_warp(features.select(1, v), proj.select(1, v), ref_proj, depth_values, config_.feature_warp);
     if (in_place) {
       volume_sum.add_(warped);
       volume_sq_sum.add_(warped.pow_(2));

@@ -36,6 +36,7 @@ c10::impl::GenericDict config_to_dict(const MvsNetConfig& c) {
   d.insert("refine", c.refine);
   d.insert("num_views", static_cast<int64_t>(c.num_views));
   d.insert("input_normalization", std::string(to_string(c.input_normalization)));
+  d.insert("feature_warp", std::string(to_string(c.feature_warp)));
   return d;
 }
 
@@ -50,6 +51,9 @@ MvsNetConfig config_from_dict(const c10::impl::GenericDict& d, const std::string
     if (d.contains("input_normalization")) {
       c.input_normalization = input_normalization_from_string(d.at("input_normalization").toStringRef());
     }
+    // Those written before this field were trained with MVSNet_pytorch's warp.
+    c.feature_warp = d.contains("feature_warp") ? feature_warp_from_string(d.at("feature_warp").toStringRef())
+                                                : FeatureWarp::kMvsNetPytorch;
   } catch (const std::exception& e) {
     throw std::runtime_error("checkpoint '" + path + "': malformed network config");
   }
@@ -165,6 +169,8 @@ LoadedModel load_model(const std::string& path, const torch::Device& device, con
     for (const auto& m : root.at("metrics").toGenericDict()) out.meta.metrics[m.key().toStringRef()] = m.value().toDouble();
   } else {
     out.format = "mvsnet_pytorch";
+    // Their files carry no config: read them as MVSNet_pytorch runs them (and as the parity vectors were made).
+    if (!expected) config.feature_warp = FeatureWarp::kMvsNetPytorch;
   }
   out.model = MvsNet(config);
   load_state_dict(*out.model, weights, path);

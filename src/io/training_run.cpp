@@ -187,11 +187,13 @@ TrainingRun::TrainingRun(TrainingRunConfig config, const std::function<TrainingD
     auto loaded = load_model(config_.init, config_.device);
     model = loaded.model;
     messages_ << "initialised from " << config_.init << " (" << loaded.format << ")\n";
+    if (config_.feature_warp) model->set_feature_warp(*config_.feature_warp);
   } else {
     torch::manual_seed(config_.seed);
     MvsNetConfig mcfg = config_.new_model;
     mcfg.num_depth = config_.trainer.num_depth;
     mcfg.num_views = config_.data.views_in;
+    mcfg.feature_warp = config_.feature_warp.value_or(mcfg.feature_warp);
     model = MvsNet(mcfg);
   }
   model->set_num_depth(config_.trainer.num_depth);

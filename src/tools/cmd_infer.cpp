@@ -51,6 +51,7 @@ UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
       .option("views", "3", "views per depth map (reference + neighbours)")
       .option("num-depth", "0", "depth planes (multiple of 8; 0 = 128 at 640 wide, scaled with the width)")
       .option("depth-sampling", "", "depth|inverse_depth (default: the checkpoint's)")
+      .option("feature-warp", "", "exact|mvsnet_pytorch: where the cost volume samples the source views (default: the checkpoint's)")
       .option("max-width", "0", "scale images down to at most this width (0 = keep)")
       .option("max-height", "0", "scale images down to at most this height (0 = keep)")
       .option("depth-min", "0", "override the near end of the depth range (0 = from the cam file)")
@@ -73,6 +74,7 @@ UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
 
   auto loaded = umvs::load_model(args.str("checkpoint"), device);
   if (args.given("depth-sampling")) loaded.model->set_depth_sampling(umvs::depth_sampling_from_string(args.str("depth-sampling")));
+  if (args.given("feature-warp")) loaded.model->set_feature_warp(umvs::feature_warp_from_string(args.str("feature-warp")));
   umvs::DepthEstimatorConfig cfg;
   cfg.max_width = args.integer("max-width");
   cfg.max_height = args.integer("max-height");

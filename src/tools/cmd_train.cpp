@@ -112,8 +112,13 @@ void check_training_options(const umvs::Args& args) {
   }
   if (args.integer("augment") != 0 && args.integer("augment") != 1) throw std::invalid_argument("--augment must be 0 or 1");
   umvs::depth_sampling_from_string(args.str("depth-sampling"));
+  if (args.given("feature-warp")) umvs::feature_warp_from_string(args.str("feature-warp"));
   if (args.given("eval-only")) {
     if (args.on("resume") || args.on("overwrite")) throw std::invalid_argument("--eval-only trains nothing: no --resume or --overwrite");
+    if (args.given("feature-warp")) {
+      throw std::invalid_argument("--eval-only scores the checkpoint as saved: no --feature-warp (export a copy with "
+                                  "--init CHECKPOINT --feature-warp ... --steps 0)");
+    }
     return;
   }
   if (args.str("out").empty()) throw std::invalid_argument("--out is required for training");
@@ -251,6 +256,9 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
       .option("height", "512", "network input height (multiple of 32; 0 = from the images)")
       .option("num-depth", "128", "depth hypotheses during training (multiple of 8)")
       .option("depth-sampling", "depth", "depth | inverse_depth (new models only)")
+      .option("feature-warp", "",
+              "exact | mvsnet_pytorch: where the cost volume samples the source views (default: the --init "
+              "model's; exact for new models)")
       .option("steps", "10000", "total optimisation steps (0: write the initial model and exit)")
       .option("batch", "1", "tuples per step")
       .option("micro-batch", "0",
@@ -386,6 +394,7 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
   run.init = args.str("init");
   run.new_model.depth_sampling = umvs::depth_sampling_from_string(args.str("depth-sampling"));
   run.new_model.input_normalization = umvs::input_normalization_from_string(args.str("input-normalization"));
+  if (args.given("feature-warp")) run.feature_warp = umvs::feature_warp_from_string(args.str("feature-warp"));
   run.seed = static_cast<uint64_t>(args.integer("seed"));
   run.trainer = tcfg;
   run.data = data_cfg;

@@ -70,7 +70,8 @@ class FastMvsNet {
 class VarianceCostVolume {
  public:
   // features [B,V,C,h,w] float32 CPU, view 0 the reference; proj [B,V,4,4]; depth_values [B,D]
-  VarianceCostVolume(const torch::Tensor& features, const torch::Tensor& proj, const torch::Tensor& depth_values);
+  VarianceCostVolume(const torch::Tensor& features, const torch::Tensor& proj, const torch::Tensor& depth_values,
+                     FeatureWarp warp);
   // Planes [begin, end) -> [B,C,end-begin,h,w]; planes outside [0, D) are zeros (convolution padding).
   torch::Tensor planes(int64_t begin, int64_t end) const;
   int64_t num_planes() const { return D_; }
@@ -78,6 +79,7 @@ class VarianceCostVolume {
 
  private:
   int64_t B_ = 0, V_ = 0, C_ = 0, H_ = 0, W_ = 0, D_ = 0;
+  FeatureWarp warp_ = FeatureWarp::kExact;
   torch::Tensor features_;  // [B,V,h,w,C]
   torch::Tensor depth_;     // [B,D]
   std::vector<torch::Tensor> rot_xyz_, trans_;  // per source view: homography_rays [B,3,hw], [B,3]
@@ -86,6 +88,6 @@ class VarianceCostVolume {
 // The whole volume at once (tests, small inputs): VarianceCostVolume(...).planes(0, D).
 //   -> [B,C,D,h,w]
 torch::Tensor variance_cost_volume(const torch::Tensor& features, const torch::Tensor& proj,
-                                   const torch::Tensor& depth_values);
+                                   const torch::Tensor& depth_values, FeatureWarp warp);
 
 }  // namespace umvs

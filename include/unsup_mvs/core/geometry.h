@@ -17,6 +17,16 @@ enum class DepthSampling {
 const char* to_string(DepthSampling s);
 DepthSampling depth_sampling_from_string(const std::string& s);  // "depth" | "inverse_depth"
 
+// Where the cost volume's homography warp samples a source feature map of width w.
+enum class FeatureWarp {
+  kExact,          // at the pixel the point projects to (grid_sample align_corners = true)
+  kMvsNetPytorch,  // as MVSNet_pytorch runs on torch >= 1.3: its (w-1)/2 grid normalisation read
+                   // with align_corners = false, i.e. at x*w/(w-1) - 0.5: half a feature pixel
+                   // (two image pixels) off at the borders. Kept for its weights and parity.
+};
+const char* to_string(FeatureWarp w);
+FeatureWarp feature_warp_from_string(const std::string& s);  // "exact" | "mvsnet_pytorch"
+
 // D increasing depth hypotheses in [depth_min, depth_max], computed in float64 and rounded once
 // to float32 (MVSNet's exact values for uniform sampling). Throws std::invalid_argument on
 // non-positive, non-finite or empty ranges or D < 2.  -> [D] float32
@@ -65,10 +75,9 @@ HomographyRays homography_rays(const torch::Tensor& src_proj, const torch::Tenso
 // MVSNet's differentiable homography warp of source features into the reference frustum.
 //   src_features [B,C,H,W]; src_proj, ref_proj [B,4,4] (mvsnet_projection_matrix at feature
 //   resolution); depth_values [B,D]  -> [B,C,D,H,W], zero outside the source image.
-// Bit-compatible with MVSNet_pytorch as run on torch >= 1.3 (grid normalised by (W-1)/2,
-// grid_sample with align_corners = false).
+// With FeatureWarp::kMvsNetPytorch it is bit-compatible with MVSNet_pytorch as run on torch >= 1.3.
 torch::Tensor homography_warp(const torch::Tensor& src_features, const torch::Tensor& src_proj,
-                              const torch::Tensor& ref_proj, const torch::Tensor& depth_values);
+                              const torch::Tensor& ref_proj, const torch::Tensor& depth_values, FeatureWarp warp);
 
 // Inverse warp for the photometric loss: sample `src_image` at the source pixel of every
 // reference pixel with depth `depth` (bilinear, pixel-centre convention). Gradients flow into

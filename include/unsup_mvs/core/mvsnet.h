@@ -40,6 +40,8 @@ struct MvsNetConfig {
   int num_views = 3;
   // Not a property of the weights' shapes but of what they were trained on: saved with checkpoints.
   InputNormalization input_normalization = InputNormalization::kNone;
+  // Where the cost volume samples the source features (geometry.h). Saved with checkpoints too.
+  FeatureWarp feature_warp = FeatureWarp::kExact;
 
   // Throws std::invalid_argument naming the bad field.
   void validate() const;
@@ -141,6 +143,7 @@ class MvsNetImpl : public torch::nn::Module {
   // config that is saved with checkpoints and used by callers to build depth_values.
   void set_num_depth(int d) { config_.num_depth = d; }
   void set_depth_sampling(DepthSampling s) { config_.depth_sampling = s; }
+  void set_feature_warp(FeatureWarp w) { config_.feature_warp = w; }
 
   FeatureNet feature{nullptr};
   CostRegNet cost_regularization{nullptr};

@@ -32,7 +32,8 @@ struct LoadedModel {
 // Loads either format (detected from the content) onto `device`, in eval() mode.
 // `expected` (optional) is the architecture the caller needs; a checkpoint of another
 // architecture is refused with a message naming the mismatch. For MVSNet_pytorch weights, which
-// carry no config, `expected` (or the defaults) gives the config.
+// carry no config, `expected` gives the config, else the defaults with MVSNet_pytorch's feature
+// warp. Our checkpoints written before the feature warp was saved read as MVSNet_pytorch's too.
 // Throws std::runtime_error naming the file for a missing or unfitting file, one that is not a
 // regular file or larger than kMaxCheckpointBytes (io/input_limits.h), a damaged one (zip CRC
 // mismatch, unreadable pickle) and a model with NaN or infinite weights.

@@ -7,6 +7,7 @@
 #include <functional>
 #include <iosfwd>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -32,6 +33,7 @@ struct TrainingRunConfig {
   std::vector<std::string> may_change_on_resume;  // options a resume may change (not compared)
   std::string init;                      // checkpoint to start from; "" = new model (new_model)
   MvsNetConfig new_model;                // the network of a new model (num_views, sampling, ...)
+  std::optional<FeatureWarp> feature_warp;  // set on a new or --init model (none: theirs)
   uint64_t seed = 1;                     // initial weights and data order
   TrainerConfig trainer;
   TupleConfig data;                      // the tuples' size and views (memory check)
