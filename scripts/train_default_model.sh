@@ -18,7 +18,9 @@
 #   (installed | DIR[,DIR] | none), DEVICE (cpu | cuda), WIDTH x HEIGHT, NUM_DEPTH (160 x 128, 32),
 #   BATCH (1), INIT (start from this checkpoint instead of random weights), MAX_MINUTES (0: none),
 #   RENDER_JOBS (scenes rendered at once, 1), LR (1e-3), LR_SCHEDULE (constant | cosine), LR_MIN (0),
-#   FEATURE_WARP (exact; mvsnet_pytorch only to reproduce models trained before the warp was fixed)
+#   FEATURE_WARP (exact; mvsnet_pytorch only to reproduce models trained before the warp was fixed),
+#   RENDER_WIDTH x RENDER_HEIGHT (320 x 256: the rendered scenes' size), SUPERVISED_SHARE (0.75: the
+#   share of tuples from rendered scenes; the rest are templeRing's, photometric)
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
@@ -40,6 +42,9 @@ LR="${LR:-1e-3}"
 LR_SCHEDULE="${LR_SCHEDULE:-constant}"
 LR_MIN="${LR_MIN:-0}"
 FEATURE_WARP="${FEATURE_WARP:-exact}"
+RENDER_WIDTH="${RENDER_WIDTH:-320}"
+RENDER_HEIGHT="${RENDER_HEIGHT:-256}"
+SUPERVISED_SHARE="${SUPERVISED_SHARE:-0.75}"
 SHARED="${UMVS_SHARED_DATA:-$here/../../shared/data}"
 
 [ -x "$UMVS" ] || { echo "umvs not found at $UMVS (set UMVS=/path/to/umvs)" >&2; exit 1; }
@@ -50,9 +55,9 @@ export MALLOC_MMAP_THRESHOLD_=33554432 MALLOC_TRIM_THRESHOLD_=4294967296 MALLOC_
 export OPENBLAS_NUM_THREADS=1
 
 # Training scenes (seeds 1000..) and held-out scenes (seeds 5000.., never trained on), rendered at
-# 320x256; training zooms, crops and scales them to WIDTH x HEIGHT.
+# RENDER_WIDTH x RENDER_HEIGHT; training zooms, crops and scales them to WIDTH x HEIGHT.
 RENDER_JOBS="${RENDER_JOBS:-1}"
-UMVS="$UMVS" TEXTURES="$TEXTURES" WIDTH=320 HEIGHT=256 JOBS="$RENDER_JOBS" THREADS=$((RENDER_JOBS > 1 ? 1 : THREADS)) \
+UMVS="$UMVS" TEXTURES="$TEXTURES" WIDTH="$RENDER_WIDTH" HEIGHT="$RENDER_HEIGHT" JOBS="$RENDER_JOBS" THREADS=$((RENDER_JOBS > 1 ? 1 : THREADS)) \
   bash "$here/render_training_scenes.sh" "$WORK/data/rendered" "$SCENES_PER_RECIPE" 1
 supervised_list="$(cat "$WORK/data/rendered/train.txt")"
 val_list="$(cat "$WORK/data/rendered/heldout.txt")"
@@ -61,7 +66,7 @@ photometric=()
 if [ -d "$SHARED/templeRing" ]; then
   [ -f "$WORK/data/templeRing/pair.txt" ] ||
     "$UMVS" import middlebury --data "$SHARED/templeRing" --out "$WORK/data/templeRing" >/dev/null
-  photometric=(--data "$WORK/data/templeRing" --supervised-share 0.75)
+  photometric=(--data "$WORK/data/templeRing" --supervised-share "$SUPERVISED_SHARE")
 else
   echo "[default-model] $SHARED/templeRing not found: supervised on rendered scenes only"
 fi
