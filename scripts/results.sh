@@ -160,8 +160,9 @@ judge() {
                 p0 = $col["photometric"]; c0 = $col["consistent"]; next }
     { e1 = $col["abs_err"]; r1 = $col["abs_rel"]; w1 = $col["within_1pct"]; p1 = $col["photometric"]; c1 = $col["consistent"] }
     END {
-      # As the trainer node (decide_reload): photometric at least 1 % lower, consistency higher and >= 1 %.
-      accept = (p1 < 0.99 * p0 && c1 > c0 && c1 >= 0.01)
+      # As the trainer node (decide_reload): photometric at least 1 % lower, consistency higher by at
+      # least one percentage point.
+      accept = (p1 < 0.99 * p0 && c1 >= c0 + 0.01)
       improved = (e1 < e0) + (r1 < r0) + (w1 > w0)  # of the three ground-truth scores
       depth = improved == 3 ? "better" : improved == 0 ? "worse" : "mixed"
       if (depth == "mixed") right = "mixed"
@@ -194,7 +195,7 @@ start=$(date +%s)
   done
   echo
   echo "The label-free reload rule (trainer node): accept an adapted model only when its held-out photometric"
-  echo "loss is at least 1 % lower AND its multi-view consistency higher (and at least 1 %) than the model it replaces;"
+  echo "loss is at least 1 % lower AND its multi-view consistency higher by at least one point than the model it replaces;"
   echo "checked against the ground truth it never sees (mean abs err / abs rel / within 1 %, before -> after; better or"
   echo "worse on all three, else mixed):"
   echo

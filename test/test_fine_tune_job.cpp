@@ -194,7 +194,7 @@ TEST(FineTuneConfig, ValidateNamesTheBadField) {
   EXPECT_EQ(c.keyframe_args_overridden(), std::vector<std::string>{"--depth-min"});
 }
 
-TEST(FineTuneDecision, ReloadsOnlyWhenBothScoresAreBetterAndEnoughDepthIsConfirmed) {
+TEST(FineTuneDecision, ReloadsOnlyWhenBothScoresAreClearlyBetter) {
   const ReloadVerdict better = decide_reload({0.10, 0.30}, {0.12, 0.25});
   EXPECT_TRUE(better.reload);
   EXPECT_EQ(better.comparison, kBetterComparison);
@@ -203,8 +203,11 @@ TEST(FineTuneDecision, ReloadsOnlyWhenBothScoresAreBetterAndEnoughDepthIsConfirm
   EXPECT_FALSE(decide_reload({0.12, 0.30}, {0.12, 0.25}).reload) << "photometric equal";
   EXPECT_FALSE(decide_reload({0.1195, 0.30}, {0.12, 0.25}).reload) << "photometric lower by 0.4 %: within noise";
   EXPECT_TRUE(decide_reload({0.1185, 0.30}, {0.12, 0.25}).reload) << "photometric lower by 1.25 %";
-  EXPECT_FALSE(decide_reload({0.10, 0.009}, {0.12, 0.005}).reload) << "under the 1% floor";
-  EXPECT_TRUE(decide_reload({0.10, 0.01}, {0.12, 0.005}).reload) << "at the floor";
+  EXPECT_FALSE(decide_reload({0.10, 0.009}, {0.12, 0.0}).reload) << "under 1 % confirmed: no evidence";
+  EXPECT_TRUE(decide_reload({0.10, 0.01}, {0.12, 0.0}).reload) << "one point more, from nothing";
+  EXPECT_FALSE(decide_reload({0.10, 0.257}, {0.12, 0.25}).reload) << "consistency higher by 0.7 points: within noise";
+  EXPECT_FALSE(decide_reload({0.10, 0.125}, {0.12, 0.118}).reload) << "the trainer test's case (depth got worse)";
+  EXPECT_TRUE(decide_reload({0.10, 0.261}, {0.12, 0.25}).reload) << "consistency higher by 1.1 points";
   EXPECT_EQ(decide_reload({0.10, 0.009}, {0.12, 0.005}).comparison,
             "held-out photometric loss: new 0.1, served 0.12; multi-view consistent depth: new 0.9%, served 0.5%");
 }

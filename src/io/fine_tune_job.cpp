@@ -97,8 +97,7 @@ ReloadVerdict decide_reload(const EvalScores& candidate, const EvalScores& serve
       << 100.0 * served.consistent << "%";
   v.comparison = cmp.str();
   v.reload = candidate.photometric < (1.0 - kMinPhotometricGain) * served.photometric &&
-             candidate.consistent > served.consistent &&
-             candidate.consistent >= kMinConsistentShare;
+             candidate.consistent >= served.consistent + kMinConsistentGain;
   return v;
 }
 
