@@ -21,6 +21,17 @@
 #   FEATURE_WARP (exact; mvsnet_pytorch only to reproduce models trained before the warp was fixed),
 #   RENDER_WIDTH x RENDER_HEIGHT (320 x 256: the rendered scenes' size), SUPERVISED_SHARE (0.75: the
 #   share of tuples from rendered scenes; the rest are templeRing's, photometric)
+#
+# The shipped model is three runs of this script, each from the one before (docs/results.md,
+# "Default model", has each run's log and scores; TEXTURES as installed by install_textures.sh):
+#   1. CPU:  defaults (160x128, D = 32, 6,000 steps, constant 1e-3, random weights);
+#   2. GPU:  DEVICE=cuda WIDTH=320 HEIGHT=256 NUM_DEPTH=64 INIT=<1> STEPS=100000 MAX_MINUTES=4.7
+#            (stopped by time at step 3,761),
+#            FEATURE_WARP=mvsnet_pytorch (the warp of its day), then switched to the exact warp
+#            (umvs train --init <2> --feature-warp exact --steps 0);
+#   3. GPU:  DEVICE=cuda WIDTH=640 HEIGHT=512 NUM_DEPTH=128 RENDER_WIDTH=640 RENDER_HEIGHT=512
+#            SUPERVISED_SHARE=0.5 LR=5e-4 LR_SCHEDULE=cosine STEPS=2629 MAX_MINUTES=5.27 INIT=<2>
+#            (stopped by time at step 2,357), weights exported with --steps 0.
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
