@@ -35,6 +35,7 @@ PACKAGES=(
   python3-std-srvs python3-rosgraph-msgs python3-tf2-msgs
   # ROS 1 runtime tools: master, roslaunch, rostest, rosbag play
   ros-core python3-rostest librostest-dev rosbash
+  python3-numpy  # test/ros/test_ros_tools.py
   # the `nodelet` executable (manager / load) that launch/pipeline.launch runs
   libnodeletlib-tools
 )
