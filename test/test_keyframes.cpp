@@ -89,7 +89,7 @@ TEST(Keyframes, NewPolicyAppliesToTheNextFrame) {
   EXPECT_TRUE(buffer.is_keyframe(camera_at({0.95, 0, 0})));
 
   KeyframeConfig bad = cfg;
-  bad.buffer_size = bad.num_sources;  // needs num_sources + 1
+  bad.buffer_size = bad.num_sources;  // needs num_sources + lookahead + 1
   EXPECT_THROW(buffer.set_config(bad), std::invalid_argument);
   EXPECT_EQ(buffer.config().buffer_size, 6);
   EXPECT_EQ(buffer.keyframes().size(), 5u);
@@ -97,6 +97,7 @@ TEST(Keyframes, NewPolicyAppliesToTheNextFrame) {
   KeyframeConfig wider = cfg;
   wider.min_translation = 0.3;
   wider.buffer_size = 3;
+  wider.lookahead = 0;  // 3 = num_sources + lookahead + 1
   EXPECT_EQ(buffer.set_config(wider), (std::vector<int64_t>{0, 1}));  // the oldest go
   EXPECT_EQ(buffer.keyframes().size(), 3u);
   EXPECT_EQ(buffer.keyframes().front().id, 2);
@@ -134,6 +135,99 @@ TEST(Keyframes, NeighboursAreTheBestTriangulatingViews) {
   EXPECT_THROW(poor.select_sources(99, 2.0), std::invalid_argument);
 }
 
+// Ids of the references taken after each added keyframe, e.g. {{}, {}, {0, 1, 2}, {3}}.
+std::vector<std::vector<int64_t>> references_while_adding(KeyframeBuffer& buffer, const std::vector<Camera>& cameras,
+                                                          std::vector<ReferenceSources>* all = nullptr,
+                                                          std::vector<int64_t>* given_up = nullptr) {
+  std::vector<std::vector<int64_t>> taken;
+  for (size_t i = 0; i < cameras.size(); ++i) {
+    buffer.add(cameras[i], static_cast<double>(i));
+    taken.emplace_back();
+    for (auto& r : buffer.take_ready_references(2.0, given_up)) {
+      taken.back().push_back(r.reference_id);
+      if (all) all->push_back(std::move(r));
+    }
+  }
+  return taken;
+}
+
+// A camera driving sideways `step` m per keyframe in front of a wall 2 m away. The view score
+// peaks at a 5 degree triangulation angle and falls steeply below it; at the frustum's edges
+// a baseline triangulates at cos^2(33 deg) = 0.7 of its angle at the centre.
+std::vector<Camera> sideways_drive(int n, double step = 0.09) {
+  std::vector<Camera> cameras;
+  for (int i = 0; i < n; ++i) cameras.push_back(camera_at({step * i, 0, 0}));
+  return cameras;
+}
+
+TEST(Keyframes, EveryKeyframeBecomesAReferenceOnce) {
+  // Without lookahead a keyframe is a reference as soon as it has two neighbours: the first two
+  // wait for the third keyframe and then use the keyframes after them.
+  KeyframeConfig cfg;
+  cfg.lookahead = 0;
+  KeyframeBuffer buffer(cfg);
+  std::vector<ReferenceSources> sets;
+  const auto taken = references_while_adding(buffer, sideways_drive(5), &sets);
+  EXPECT_EQ(taken, (std::vector<std::vector<int64_t>>{{}, {}, {0, 1, 2}, {3}, {4}}));
+  ASSERT_EQ(sets.size(), 5u);
+  for (const auto& s : sets) {
+    ASSERT_EQ(s.sources.size(), 2u) << "reference " << s.reference_id;
+    for (const auto& n : s.sources) {
+      EXPECT_NE(n.id, s.reference_id);
+      EXPECT_LE(n.id, std::max<int64_t>(s.reference_id, 2)) << "a neighbour from after the set was published";
+    }
+  }
+  EXPECT_EQ(buffer.waiting_references(), 0u);
+}
+
+TEST(Keyframes, LookaheadGivesNeighboursOnBothSides) {
+  // 0.3 m per keyframe (6-9 degrees over the frustum; k +- 2 at 12-17): the best neighbours of
+  // keyframe k are k - 1 and k + 1.
+  KeyframeConfig cfg;  // lookahead 1, the default
+  ASSERT_EQ(cfg.lookahead, 1);
+  KeyframeBuffer buffer(cfg);
+  std::vector<ReferenceSources> sets;
+  const auto taken = references_while_adding(buffer, sideways_drive(6, 0.3), &sets);
+  // A reference waits for one newer keyframe; the newest one is still waiting at the end.
+  EXPECT_EQ(taken, (std::vector<std::vector<int64_t>>{{}, {}, {0, 1}, {2}, {3}, {4}}));
+  EXPECT_EQ(buffer.waiting_references(), 1u);
+  for (const auto& s : sets) {
+    if (s.reference_id == 0) continue;  // nothing before it
+    ASSERT_EQ(s.sources.size(), 2u);
+    EXPECT_EQ(std::min(s.sources[0].id, s.sources[1].id), s.reference_id - 1);
+    EXPECT_EQ(std::max(s.sources[0].id, s.sources[1].id), s.reference_id + 1);
+  }
+
+  // Invalid: negative, or a buffer too small to keep a waiting reference until it is given up.
+  KeyframeConfig bad = cfg;
+  bad.lookahead = -1;
+  EXPECT_THROW(KeyframeBuffer{bad}, std::invalid_argument);
+  bad = cfg;
+  bad.buffer_size = cfg.num_sources + cfg.lookahead;  // needs one more
+  EXPECT_THROW(KeyframeBuffer{bad}, std::invalid_argument);
+}
+
+TEST(Keyframes, AKeyframeWithoutNeighboursIsGivenUp) {
+  // The fourth keyframe looks the other way: nobody shares its view, so after num_sources newer
+  // keyframes it stops waiting; the others still become references.
+  KeyframeConfig cfg;
+  cfg.lookahead = 0;
+  KeyframeBuffer buffer(cfg);
+  std::vector<Camera> cameras = sideways_drive(6);
+  cameras[3] = camera_at({0.27, 0, 0}, 180);
+  std::vector<int64_t> given_up;
+  std::vector<ReferenceSources> sets;
+  references_while_adding(buffer, cameras, &sets, &given_up);
+  EXPECT_EQ(given_up, (std::vector<int64_t>{3}));
+  std::vector<int64_t> references;
+  for (const auto& s : sets) {
+    references.push_back(s.reference_id);
+    for (const auto& n : s.sources) EXPECT_NE(n.id, 3) << "the turned keyframe as a neighbour of " << s.reference_id;
+  }
+  EXPECT_EQ(references, (std::vector<int64_t>{0, 1, 2, 4, 5}));
+  EXPECT_EQ(buffer.waiting_references(), 0u);
+}
+
 TEST(Keyframes, OfflineSelectionOnATrajectory) {
   // 1.01 cm per frame along x: with a 10 cm threshold every 10th frame is a keyframe.
   std::vector<Camera> traj;
@@ -145,7 +239,7 @@ TEST(Keyframes, OfflineSelectionOnATrajectory) {
 
 TEST(Keyframes, InvalidConfigAndCameraAreRefused) {
   KeyframeConfig cfg;
-  cfg.buffer_size = 2;  // needs num_sources + 1 = 3
+  cfg.buffer_size = 3;  // needs num_sources + lookahead + 1 = 4
   EXPECT_THROW(KeyframeBuffer{cfg}, std::invalid_argument);
   cfg = {};
   cfg.min_translation = cfg.min_rotation_deg = cfg.min_pose_distance = 0;

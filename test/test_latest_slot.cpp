@@ -28,6 +28,23 @@ TEST(LatestSlot, NewerItemReplacesTheWaitingOneAndCountsItDropped) {
   EXPECT_EQ(slot.dropped(), 2);
 }
 
+TEST(LatestSlot, WithCapacityTheNewestItemsWaitInOrder) {
+  LatestSlot<int> slot(3);
+  EXPECT_EQ(slot.capacity(), 3u);
+  for (int i = 1; i <= 3; ++i) EXPECT_FALSE(slot.put(i));
+  EXPECT_TRUE(slot.put(4));  // 1 was the oldest waiting: dropped
+  EXPECT_TRUE(slot.put(5));  // and 2
+  EXPECT_EQ(slot.dropped(), 2);
+  EXPECT_EQ(slot.take(), 3);
+  EXPECT_EQ(slot.take(), 4);
+  EXPECT_FALSE(slot.put(6));  // room again
+  EXPECT_EQ(slot.try_take(), 5);
+  EXPECT_EQ(slot.try_take(), 6);
+  EXPECT_FALSE(slot.waiting());
+  EXPECT_EQ(slot.dropped(), 2);
+  EXPECT_THROW(LatestSlot<int>(0), std::invalid_argument);
+}
+
 TEST(LatestSlot, CloseEndsTakeAndIgnoresLaterItems) {
   LatestSlot<int> slot;
   slot.put(1);

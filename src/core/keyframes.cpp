@@ -16,9 +16,11 @@ void KeyframeConfig::validate() const {
     fail("at least one of min_translation, min_rotation_deg, min_pose_distance must be > 0");
   }
   if (num_sources < 1) fail("num_sources must be >= 1, got " + std::to_string(num_sources));
-  if (buffer_size < num_sources + 1) {
-    fail("buffer_size must be at least num_sources + 1 = " + std::to_string(num_sources + 1) + ", got " +
-         std::to_string(buffer_size));
+  if (lookahead < 0) fail("lookahead must be >= 0, got " + std::to_string(lookahead));
+  // A waiting reference must stay buffered until it is given up.
+  if (buffer_size < num_sources + lookahead + 1) {
+    fail("buffer_size must be at least num_sources + lookahead + 1 = " + std::to_string(num_sources + lookahead + 1) +
+         ", got " + std::to_string(buffer_size));
   }
   if (score_grid < 2) fail("score_grid must be >= 2, got " + std::to_string(score_grid));
   if (!(min_score >= 0)) fail("min_score must be >= 0");
@@ -57,11 +59,38 @@ const Keyframe& KeyframeBuffer::add(const Camera& camera, double stamp, int64_t*
   camera.validate("keyframe camera");
   if (evicted) *evicted = -1;
   keyframes_.push_back({next_id_++, stamp, camera});
+  waiting_.push_back(keyframes_.back().id);
   if (static_cast<int>(keyframes_.size()) > config_.buffer_size) {
     if (evicted) *evicted = keyframes_.front().id;
+    forget_waiting(keyframes_.front().id);
     keyframes_.pop_front();
   }
   return keyframes_.back();
+}
+
+void KeyframeBuffer::forget_waiting(int64_t id) {
+  waiting_.erase(std::remove(waiting_.begin(), waiting_.end(), id), waiting_.end());
+}
+
+std::vector<ReferenceSources> KeyframeBuffer::take_ready_references(double depth, std::vector<int64_t>* given_up) {
+  std::vector<ReferenceSources> ready;
+  const int64_t newest = next_id_ - 1;
+  for (auto it = waiting_.begin(); it != waiting_.end();) {
+    const int64_t id = *it;
+    const int64_t newer = newest - id;  // ids are consecutive
+    if (newer < config_.lookahead) break;  // so are all the later ones
+    std::vector<KeyframeScore> sources = select_sources(id, depth);
+    if (static_cast<int>(sources.size()) >= config_.num_sources) {
+      ready.push_back({id, std::move(sources)});
+      it = waiting_.erase(it);
+    } else if (newer >= config_.lookahead + config_.num_sources) {
+      if (given_up) given_up->push_back(id);
+      it = waiting_.erase(it);
+    } else {
+      ++it;
+    }
+  }
+  return ready;
 }
 
 const Keyframe* KeyframeBuffer::find(int64_t id) const {
@@ -103,6 +132,7 @@ std::vector<int64_t> KeyframeBuffer::set_config(const KeyframeConfig& config) {
   std::vector<int64_t> evicted;
   while (static_cast<int>(keyframes_.size()) > config_.buffer_size) {
     evicted.push_back(keyframes_.front().id);
+    forget_waiting(keyframes_.front().id);
     keyframes_.pop_front();
   }
   return evicted;
@@ -110,6 +140,7 @@ std::vector<int64_t> KeyframeBuffer::set_config(const KeyframeConfig& config) {
 
 void KeyframeBuffer::clear() {
   keyframes_.clear();
+  waiting_.clear();
   next_id_ = 0;
 }
 

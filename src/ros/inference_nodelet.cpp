@@ -92,7 +92,7 @@ class InferenceNodelet : public nodelet::Nodelet {
  public:
   ~InferenceNodelet() override {
     reload_spinner_.reset();  // no reload callback runs past this point
-    pending_.close();
+    if (pending_) pending_->close();
     if (worker_.joinable()) worker_.join();
   }
 
@@ -113,6 +113,7 @@ class InferenceNodelet : public nodelet::Nodelet {
       max_planes_ = c.max_planes;
       max_checkpoint_bytes_ = static_cast<uint64_t>(c.max_checkpoint_mb) << 20;
       reload_timeout_ = c.reload_timeout;
+      pending_ = std::make_unique<umvs::LatestSlot<unsup_mvs::KeyframeSetConstPtr>>(static_cast<size_t>(c.queue_size));
     } catch (const std::exception& e) {
       NODELET_FATAL("inference: invalid parameters: %s", e.what());
       throw;
@@ -171,18 +172,19 @@ class InferenceNodelet : public nodelet::Nodelet {
     const bool wanted = estimate_pub_.getNumSubscribers() > 0 || depth_pub_.getNumSubscribers() > 0 ||
                         confidence_pub_.getNumSubscribers() > 0;
     if (wanted && !keyframes_sub_) {
-      keyframes_sub_ = getNodeHandle().subscribe("keyframes", 1, &InferenceNodelet::onKeyframes, this);
+      keyframes_sub_ = getNodeHandle().subscribe("keyframes", static_cast<uint32_t>(pending_->capacity()),
+                                               &InferenceNodelet::onKeyframes, this);
     } else if (!wanted && keyframes_sub_) {
       keyframes_sub_.shutdown();
     }
   }
 
-  // An older set still waiting is stale now: replaced and counted as dropped.
-  void onKeyframes(const unsup_mvs::KeyframeSetConstPtr& msg) { pending_.put(msg); }
+  // Beyond ~queue_size waiting sets the oldest is stale: dropped and counted.
+  void onKeyframes(const unsup_mvs::KeyframeSetConstPtr& msg) { pending_->put(msg); }
 
   void work() {
     while (true) {
-      const std::optional<unsup_mvs::KeyframeSetConstPtr> next = pending_.take();
+      const std::optional<unsup_mvs::KeyframeSetConstPtr> next = pending_->take();
       if (!next) return;  // closed: the nodelet is going away
       const unsup_mvs::KeyframeSetConstPtr& set = *next;
       try {
@@ -250,7 +252,7 @@ class InferenceNodelet : public nodelet::Nodelet {
     NODELET_INFO_THROTTLE(2.0, "inference: keyframe %u: %dx%d depth map in %.2f s (network %.2f s), %.2f s after the "
                           "image; %ld done, %ld stale sets dropped, %ld failed",
                           set.reference_id, map.camera.width, map.camera.height, total, map.seconds, latency, processed_,
-                          static_cast<long>(pending_.dropped()), failed_.load());
+                          static_cast<long>(pending_->dropped()), failed_.load());
     publishDiagnostics(total, map.seconds, latency, served);
   }
 
@@ -269,7 +271,7 @@ class InferenceNodelet : public nodelet::Nodelet {
       status.values.push_back(p);
     };
     kv("processed", std::to_string(processed_));
-    kv("dropped_stale", std::to_string(pending_.dropped()));
+    kv("dropped_stale", std::to_string(pending_->dropped()));
     kv("failed", std::to_string(failed_.load()));
     kv("last_total_s", std::to_string(total));
     kv("last_network_s", std::to_string(network));
@@ -407,7 +409,8 @@ class InferenceNodelet : public nodelet::Nodelet {
   std::unique_ptr<ros::AsyncSpinner> reload_spinner_;
   std::shared_ptr<std::atomic<int>> loads_running_ = std::make_shared<std::atomic<int>>(0);
 
-  umvs::LatestSlot<unsup_mvs::KeyframeSetConstPtr> pending_;  // one waiting set; counts the stale ones dropped
+  // Sets waiting for the network (~queue_size; counts the stale ones dropped); made in onInit.
+  std::unique_ptr<umvs::LatestSlot<unsup_mvs::KeyframeSetConstPtr>> pending_;
   std::thread worker_;
   std::atomic<long> failed_{0};
   long processed_ = 0;

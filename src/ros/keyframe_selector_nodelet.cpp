@@ -44,6 +44,7 @@ unsup_mvs::KeyframeSelectorConfig to_reconfigure(const umvs::KeyframeStreamConfi
   r.min_pose_distance = c.keyframes.min_pose_distance;
   r.buffer_size = c.keyframes.buffer_size;
   r.num_sources = c.keyframes.num_sources;
+  r.lookahead = c.keyframes.lookahead;
   r.min_view_score = c.keyframes.min_score;
   r.view_score_grid = c.keyframes.score_grid;
   r.depth_min = c.depth_min;
@@ -57,6 +58,7 @@ umvs::KeyframeStreamConfig with_reconfigure(umvs::KeyframeStreamConfig c, const 
   c.keyframes.min_pose_distance = r.min_pose_distance;
   c.keyframes.buffer_size = r.buffer_size;
   c.keyframes.num_sources = r.num_sources;
+  c.keyframes.lookahead = r.lookahead;
   c.keyframes.min_score = r.min_view_score;
   c.keyframes.score_grid = r.view_score_grid;
   c.depth_min = r.depth_min;
@@ -134,10 +136,10 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
         [this](const unsup_mvs::KeyframeSelectorConfig& r) { onReconfigure(r); });
     const auto& c = stream_.keyframes;
     NODELET_INFO("keyframe_selector: %s + %s in '%s' (%s sync), keyframe after %.2f m / %.1f deg / pose distance %.2f, "
-                 "buffer %d, %d neighbours, depth %.2f-%.2f m%s",
+                 "buffer %d, %d neighbours (lookahead %d keyframes), depth %.2f-%.2f m%s",
                  image_topic_.c_str(), info_sub_.getTopic().c_str(), world_frame_.c_str(),
                  approximate_sync ? "approximate" : "exact", c.min_translation, c.min_rotation_deg, c.min_pose_distance,
-                 c.buffer_size, c.num_sources, stream_.depth_min, stream_.depth_max,
+                 c.buffer_size, c.num_sources, c.lookahead, stream_.depth_min, stream_.depth_max,
                  depth_from_estimates_ ? " (then from depth estimates)" : "");
   }
 
@@ -254,21 +256,26 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
     publishPoses(image->header.stamp);
 
     const umvs::DepthRange range = depth_range_->range();
-    const double near = range.near, far = range.far;
-    const auto sources = buffer_->select_sources(ref.id, 0.5 * (near + far));
-    if (static_cast<int>(sources.size()) < buffer_->config().num_sources) {
-      NODELET_DEBUG("keyframe_selector: keyframe %ld has %zu usable neighbours, waiting for more", static_cast<long>(ref.id),
-                    sources.size());
-      return;
+    std::vector<int64_t> given_up;
+    for (const auto& ready : buffer_->take_ready_references(0.5 * (range.near + range.far), &given_up)) {
+      publishSet(ready, range.near, range.far);
     }
+    for (const int64_t id : given_up) {
+      NODELET_DEBUG("keyframe_selector: keyframe %ld found no %d usable neighbours; it is no reference",
+                    static_cast<long>(id), buffer_->config().num_sources);
+    }
+  }
+
+  void publishSet(const umvs::ReferenceSources& ready, double near, double far) {
+    const StoredFrame& ref = frames_by_id_.at(ready.reference_id);
     unsup_mvs::KeyframeSet set;
-    set.header.stamp = image->header.stamp;
+    set.header.stamp = ref.image->header.stamp;
     set.header.frame_id = world_frame_;
-    set.reference_id = static_cast<uint32_t>(ref.id);
-    set.reference_image = *image;
-    set.reference_info = *info;
-    set.reference_pose = pose;
-    for (const auto& s : sources) {
+    set.reference_id = static_cast<uint32_t>(ready.reference_id);
+    set.reference_image = *ref.image;
+    set.reference_info = *ref.info;
+    set.reference_pose = ref.pose;
+    for (const auto& s : ready.sources) {
       const StoredFrame& f = frames_by_id_.at(s.id);
       set.source_ids.push_back(static_cast<uint32_t>(s.id));
       set.source_images.push_back(*f.image);
@@ -280,7 +287,7 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
     keyframes_pub_.publish(set);
     ++sets_;
     NODELET_INFO_THROTTLE(10.0, "keyframe_selector: %ld frames, %ld keyframe sets; keyframe %ld with %u, %u, depth %.2f-%.2f m",
-                          frames_, sets_, static_cast<long>(ref.id), set.source_ids[0],
+                          frames_, sets_, static_cast<long>(ready.reference_id), set.source_ids[0],
                           set.source_ids.size() > 1 ? set.source_ids[1] : 0u, near, far);
   }
 

@@ -26,6 +26,7 @@ umvs::KeyframeConfig keyframe_config_from_ros(const ros::NodeHandle& nh) {
   nh.param("min_pose_distance", c.min_pose_distance, c.min_pose_distance);
   nh.param("buffer_size", c.buffer_size, c.buffer_size);
   nh.param("num_sources", c.num_sources, c.num_sources);
+  nh.param("lookahead", c.lookahead, c.lookahead);
   nh.param("min_view_score", c.min_score, c.min_score);
   nh.param("view_score_grid", c.score_grid, c.score_grid);
   c.validate();
@@ -72,6 +73,7 @@ void InferenceNodeConfig::validate() const {
     throw std::invalid_argument("need max_image_pixels >= 1, max_views >= 2, max_planes >= 8, max_checkpoint_mb >= 1 "
                                 "and reload_timeout > 0");
   }
+  if (queue_size < 1) throw std::invalid_argument("queue_size must be >= 1, got " + std::to_string(queue_size));
   if (estimator.num_depth > max_planes) {
     throw std::invalid_argument("num_depth " + std::to_string(estimator.num_depth) + " is more than max_planes " +
                                 std::to_string(max_planes));
@@ -92,6 +94,7 @@ InferenceNodeConfig inference_node_config_from_ros(const ros::NodeHandle& nh) {
   nh.param("max_planes", c.max_planes, c.max_planes);
   nh.param("max_checkpoint_mb", c.max_checkpoint_mb, c.max_checkpoint_mb);
   nh.param("reload_timeout", c.reload_timeout, c.reload_timeout);
+  nh.param("queue_size", c.queue_size, c.queue_size);
   c.validate();
   return c;
 }

@@ -207,12 +207,12 @@ TEST(KeyframeSelectorReconfigureTest, StartsWithTheLaunchValuesAndChecksRequests
   EXPECT_TRUE(log.wait_for("need 0 < depth_min < depth_max", 10.0)) << log.all();
   c = reconfigure(kSelector, Request().set("buffer_size", 2));
   EXPECT_EQ(int_of(c, "buffer_size"), 20);
-  EXPECT_TRUE(log.wait_for("buffer_size must be at least num_sources + 1", 10.0)) << log.all();
+  EXPECT_TRUE(log.wait_for("buffer_size must be at least num_sources + lookahead + 1", 10.0)) << log.all();
 
-  c = reconfigure(kSelector, Request().set("num_sources", 3).set("depth_max", 8.0).set("buffer_size", 4));
+  c = reconfigure(kSelector, Request().set("num_sources", 3).set("depth_max", 8.0).set("buffer_size", 5));
   EXPECT_EQ(int_of(c, "num_sources"), 3);
   EXPECT_DOUBLE_EQ(double_of(c, "depth_max"), 8.0);
-  EXPECT_EQ(int_of(c, "buffer_size"), 4);
+  EXPECT_EQ(int_of(c, "buffer_size"), 5);
   double on_server = 0;
   ASSERT_TRUE(nh.getParam(std::string(kSelector) + "/depth_max", on_server));
   EXPECT_DOUBLE_EQ(on_server, 8.0);

@@ -1,12 +1,15 @@
-// A thread-safe slot that holds at most one waiting item: put() replaces a waiting item (which
-// is then counted as dropped), take() waits for an item or close(). The inference nodelet's
-// queue: while the network is busy only the newest keyframe set waits (latest wins).
+// A thread-safe slot that holds at most `capacity` waiting items (1 unless asked): put() beyond
+// that drops the oldest waiting item (counted as dropped), take() waits for the oldest item or
+// close(). The inference nodelet's queue: while the network is busy only the newest keyframe
+// sets wait (latest win), so the latency stays bounded.
 #pragma once
 
 #include <condition_variable>
 #include <cstdint>
+#include <deque>
 #include <mutex>
 #include <optional>
+#include <stdexcept>
 #include <utility>
 
 namespace umvs {
@@ -14,17 +17,24 @@ namespace umvs {
 template <typename T>
 class LatestSlot {
  public:
-  // Stores `item`; a waiting item that nobody took is replaced and counted as dropped. Returns
-  // true when one was dropped. After close() the item is discarded (not counted) and false
-  // returned.
+  explicit LatestSlot(size_t capacity = 1) : capacity_(capacity) {
+    if (capacity < 1) throw std::invalid_argument("LatestSlot: capacity must be >= 1");
+  }
+
+  // Stores `item`; when `capacity` items already wait, the oldest is dropped and counted.
+  // Returns true when one was dropped. After close() the item is discarded (not counted) and
+  // false returned.
   bool put(T item) {
     bool replaced = false;
     {
       std::lock_guard<std::mutex> lock(mutex_);
       if (closed_) return false;
-      replaced = item_.has_value();
-      if (replaced) ++dropped_;
-      item_ = std::move(item);
+      replaced = items_.size() >= capacity_;
+      if (replaced) {
+        ++dropped_;
+        items_.pop_front();
+      }
+      items_.push_back(std::move(item));
     }
     cv_.notify_one();
     return replaced;
@@ -34,7 +44,7 @@ class LatestSlot {
   // nothing, even when an item still waits).
   std::optional<T> take() {
     std::unique_lock<std::mutex> lock(mutex_);
-    cv_.wait(lock, [this] { return closed_ || item_.has_value(); });
+    cv_.wait(lock, [this] { return closed_ || !items_.empty(); });
     if (closed_) return std::nullopt;
     return pop(lock);
   }
@@ -42,7 +52,7 @@ class LatestSlot {
   // The waiting item if there is one, without waiting.
   std::optional<T> try_take() {
     std::unique_lock<std::mutex> lock(mutex_);
-    if (closed_ || !item_) return std::nullopt;
+    if (closed_ || items_.empty()) return std::nullopt;
     return pop(lock);
   }
 
@@ -61,8 +71,9 @@ class LatestSlot {
   }
   bool waiting() const {
     std::lock_guard<std::mutex> lock(mutex_);
-    return item_.has_value();
+    return !items_.empty();
   }
+  size_t capacity() const { return capacity_; }
   bool closed() const {
     std::lock_guard<std::mutex> lock(mutex_);
     return closed_;
@@ -70,14 +81,15 @@ class LatestSlot {
 
  private:
   std::optional<T> pop(std::unique_lock<std::mutex>&) {
-    std::optional<T> out = std::move(item_);
-    item_.reset();
+    std::optional<T> out = std::move(items_.front());
+    items_.pop_front();
     return out;
   }
 
   mutable std::mutex mutex_;
   std::condition_variable cv_;
-  std::optional<T> item_;
+  const size_t capacity_;
+  std::deque<T> items_;
   int64_t dropped_ = 0;
   bool closed_ = false;
 };

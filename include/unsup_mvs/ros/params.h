@@ -42,6 +42,7 @@ struct InferenceNodeConfig {
   int max_planes = 256;
   int max_checkpoint_mb = 256;
   double reload_timeout = 60.0;  // s
+  int queue_size = 4;  // keyframe sets waiting while the network is busy (the oldest is dropped beyond)
   void validate() const;
 };
 InferenceNodeConfig inference_node_config_from_ros(const ros::NodeHandle& nh);
