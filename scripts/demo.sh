@@ -8,8 +8,10 @@
 #   4. saves the fused cloud (fusion's save_cloud service), takes an RViz screenshot, and prints
 #      `umvs eval cloud` against the scene's ground-truth surface.
 # Usage: scripts/demo.sh [WORK_DIR]      (default /tmp/umvs_demo; it is replaced)
-# Environment: DEMO_SCENE (room), DEMO_SEED (7), DEMO_VIEWS (24), DEMO_RATE (playback factor, 0.5),
-#              DEMO_RVIZ (1; 0 = no RViz, no screenshot), CHECKPOINT (default model).
+# Environment: DEMO_SCENE (room), DEMO_SEED (7), DEMO_VIEWS (24), DEMO_WIDTH x DEMO_HEIGHT (640 x 512,
+#              the default model's training size; images and inference), DEMO_PLANES (128),
+#              DEMO_RATE (playback factor, 0.25: slow enough for a 2-core CPU to infer every
+#              keyframe at that size), DEMO_RVIZ (1; 0 = no RViz, no screenshot), CHECKPOINT (default model).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$PWD
@@ -17,7 +19,10 @@ WORK=$(realpath -m "${1:-/tmp/umvs_demo}")
 SCENE=${DEMO_SCENE:-room}
 SEED=${DEMO_SEED:-7}
 VIEWS=${DEMO_VIEWS:-24}
-RATE=${DEMO_RATE:-0.5}
+WIDTH=${DEMO_WIDTH:-640}
+HEIGHT=${DEMO_HEIGHT:-512}
+PLANES=${DEMO_PLANES:-128}
+RATE=${DEMO_RATE:-0.25}
 RVIZ=${DEMO_RVIZ:-1}
 CHECKPOINT=$(realpath "${CHECKPOINT:-$ROOT/models/unsup_mvsnet.pt}")
 start=$(date +%s)
@@ -34,8 +39,8 @@ UMVS=$ROOT/build/devel/lib/unsup_mvs/umvs
 
 rm -rf "$WORK"
 mkdir -p "$WORK"
-say "rendering a synthetic $SCENE ($VIEWS views, 320x256) with ground truth into $WORK/scene"
-"$UMVS" synth --scene "$SCENE" --seed "$SEED" --views "$VIEWS" --width 320 --height 256 --out "$WORK/scene" >/dev/null
+say "rendering a synthetic $SCENE ($VIEWS views, ${WIDTH}x$HEIGHT) with ground truth into $WORK/scene"
+"$UMVS" synth --scene "$SCENE" --seed "$SEED" --views "$VIEWS" --width "$WIDTH" --height "$HEIGHT" --out "$WORK/scene" >/dev/null
 "$UMVS" bag --data "$WORK/scene" --out "$WORK/scene.bag" --rate 2 >/dev/null
 "$UMVS" bag --inspect "$WORK/scene.bag"
 
@@ -55,9 +60,9 @@ if [[ "$RVIZ" == 1 ]]; then
   pids+=($!)
   export DISPLAY=$display
 fi
-say "replaying at ${RATE}x through replay.launch with $CHECKPOINT (log: $WORK/launch.log)"
+say "replaying at ${RATE}x through replay.launch with $CHECKPOINT, inference at ${WIDTH}x$HEIGHT, $PLANES planes (log: $WORK/launch.log)"
 roslaunch -p "${ROS_MASTER_URI##*:}" unsup_mvs replay.launch bag:="$WORK/scene.bag" checkpoint:="$CHECKPOINT" clouds_dir:="$WORK" \
-  rate:="$RATE" rviz:=$([[ "$RVIZ" == 1 ]] && echo true || echo false) trainer:=false >"$WORK/launch.log" 2>&1 &
+  max_width:="$WIDTH" max_height:="$HEIGHT" num_depth:="$PLANES" rate:="$RATE" rviz:=$([[ "$RVIZ" == 1 ]] && echo true || echo false) trainer:=false >"$WORK/launch.log" 2>&1 &
 pids+=($!)
 
 # roslaunch logs the player's exit when the bag is done (polling the master is unreliable under load).
