@@ -9,12 +9,13 @@
 //  * The neighbours of a reference are the buffered keyframes with the highest MVSNet
 //    view-selection score (core/view_selection.h) on points sampled in the reference frustum.
 //  * Every keyframe is a reference once. It waits for `lookahead` newer keyframes (so that they
-//    can be its neighbours too: one on each side of a forward motion triangulates better than
-//    two behind it) and, beyond that, until it has num_sources neighbours; a keyframe that still
+//    can be its neighbours too: neighbours on both sides of it along the path see what one side
+//    occludes) and, beyond that, until it has num_sources neighbours; a keyframe that still
 //    has none after lookahead + num_sources newer ones is given up. With lookahead 0 a keyframe
 //    is a reference as soon as it has its neighbours; the first keyframes of a run get theirs
-//    from the keyframes after them. The default, 1, made the demo's fused rooms 4-6 F-score
-//    points better than references with past neighbours only (docs/results.md).
+//    from the keyframes after them. With the default, 1, the demo's fused rooms scored 4-6 F-score
+//    points more than with the earlier policy (past neighbours only, the first keyframes
+//    dropped; docs/results.md).
 #pragma once
 
 #include <cstdint>

@@ -1,7 +1,7 @@
 // A thread-safe slot that holds at most `capacity` waiting items (1 unless asked): put() beyond
 // that drops the oldest waiting item (counted as dropped), take() waits for the oldest item or
 // close(). The inference nodelet's queue: while the network is busy only the newest keyframe
-// sets wait (latest win), so the latency stays bounded.
+// sets wait, so the latency stays bounded.
 #pragma once
 
 #include <condition_variable>
