@@ -112,7 +112,9 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
 
     tf_buffer_ = std::make_unique<tf2_ros::Buffer>(ros::Duration(30.0));
     tf_listener_ = std::make_unique<tf2_ros::TransformListener>(*tf_buffer_, nh);
-    keyframes_pub_ = nh.advertise<unsup_mvs::KeyframeSet>("keyframes", 2);
+    // Sets can go out in bursts (a keyframe that waited for neighbours, then the newest one): room
+    // for them towards subscribers in other processes.
+    keyframes_pub_ = nh.advertise<unsup_mvs::KeyframeSet>("keyframes", kSetQueue);
     poses_pub_ = nh.advertise<geometry_msgs::PoseArray>("keyframe_poses", 1, true);
     if (depth_from_estimates_) estimate_sub_ = nh.subscribe("depth_estimate", 1, &KeyframeSelectorNodelet::onEstimate, this);
 
@@ -318,6 +320,7 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
   }
 
   static constexpr double kInfoSilenceSeconds = 3.0;  // images without CameraInfo for this long: warn
+  static constexpr uint32_t kSetQueue = 4;            // keyframe sets queued per remote subscriber
 
   std::string world_frame_;
   double tf_timeout_ = 0.1;
