@@ -132,5 +132,39 @@ TEST(CliJson, EvalDepthPrintsNullForMetricsWithoutPixels) {
   EXPECT_EQ(j.at("overall").at("evaluated_pixels"), exact.at("gt_pixels"));
 }
 
+TEST(CliJson, EvalDepthSplitsErrorsByCovisibility) {
+  const std::string gt = test::scene("cli_covis_gt");
+  const std::string est = test::temp_dir("cli_covis_est");
+  fs::create_directories(est + "/depth");
+  for (int id : {0, 1}) {  // 2 % too far on every pixel
+    const std::string stem = "/0000000" + std::to_string(id) + ".pfm";
+    write_pfm(est + "/depth" + stem, read_pfm(gt + "/depth_gt" + stem) * 1.02);
+  }
+  const Result r = run_umvs("eval depth --est " + est + " --gt " + gt + " --covisibility-sources 2 --json", kOnlyStdout);
+  ASSERT_EQ(r.status, 0) << r.output;
+  const auto j = nlohmann::json::parse(r.output);
+  EXPECT_EQ(j.at("covisibility_sources"), 2);
+  const auto& all = j.at("overall");
+  const auto& seen = j.at("seen");
+  const auto& unseen = j.at("unseen");
+  // Every ground-truth pixel is seen or unseen, and the room's neighbours see most of them.
+  EXPECT_EQ(seen.at("gt_pixels").get<int64_t>() + unseen.at("gt_pixels").get<int64_t>(), all.at("gt_pixels").get<int64_t>());
+  const double share = all.at("seen_share");
+  EXPECT_GT(share, 0.5);
+  EXPECT_LT(share, 1.0);
+  EXPECT_NEAR(share, seen.at("gt_pixels").get<double>() / all.at("gt_pixels").get<double>(), 1e-9);
+  EXPECT_NEAR(seen.at("abs_rel").get<double>(), 0.02, 1e-5);
+  EXPECT_NEAR(unseen.at("abs_rel").get<double>(), 0.02, 1e-5);
+  ASSERT_EQ(j.at("views").size(), 2u);
+  EXPECT_TRUE(j["views"][0].contains("seen")) << j["views"][0];
+
+  const Result no_split = run_umvs("eval depth --est " + est + " --gt " + gt + " --json", kOnlyStdout);
+  ASSERT_EQ(no_split.status, 0) << no_split.output;
+  EXPECT_FALSE(nlohmann::json::parse(no_split.output).contains("seen"));
+  const Result negative = run_umvs("eval depth --est " + est + " --gt " + gt + " --covisibility-sources -1", kOnlyStderr);
+  EXPECT_NE(negative.status, 0);
+  EXPECT_TRUE(contains(negative.output, "--covisibility-sources")) << negative.output;
+}
+
 }  // namespace
 }  // namespace umvs

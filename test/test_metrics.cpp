@@ -85,5 +85,45 @@ TEST(DepthMetrics, GroundTruthAgainstItselfAndKnownErrors) {
   EXPECT_THROW(evaluate_depth(est.slice(0, 1), gt, torch::Tensor()), std::invalid_argument);
 }
 
+// A wall at z = 2 m seen straight on by a 64x48 camera (f = 50 px) and by sources moved sideways:
+// a source 0.64 m to the right sees the wall 16 px further left, so the reference's first 16
+// columns lie outside it.
+TEST(Covisibility, SourcesOutOfViewAndOccludersHideReferencePixels) {
+  Eigen::Matrix3d K;
+  K << 50, 0, 31.5, 0, 50, 23.5, 0, 0, 1;
+  const auto camera_at = [&](double x) {
+    Camera c;
+    c.K = K;
+    c.T_cam_world(0, 3) = -x;  // centre at (x, 0, 0), looking along +z
+    c.width = 64;
+    c.height = 48;
+    return c;
+  };
+  const auto wall = torch::full({48, 64}, 2.0f);
+  DepthView right{wall.clone(), camera_at(0.64)};
+  // Something 1 m in front of the right source hides its columns 30-39: reference columns 46-55.
+  right.depth.slice(1, 30, 40).fill_(1.0f);
+  const DepthView left{wall.clone(), camera_at(-0.64)};
+
+  const auto seen = covisible_by_ground_truth(wall, camera_at(0.0), {right});
+  ASSERT_EQ(seen.sizes(), wall.sizes());
+  const auto column_seen = [&](const torch::Tensor& mask, int u) { return mask.select(1, u).all().item<bool>(); };
+  const auto column_unseen = [&](const torch::Tensor& mask, int u) { return !mask.select(1, u).any().item<bool>(); };
+  for (int u : {0, 8, 14}) EXPECT_TRUE(column_unseen(seen, u)) << "column " << u << " lies outside the source";
+  for (int u : {17, 30, 44}) EXPECT_TRUE(column_seen(seen, u)) << "column " << u;
+  for (int u : {47, 50, 54}) EXPECT_TRUE(column_unseen(seen, u)) << "column " << u << " is hidden in the source";
+  for (int u : {57, 63}) EXPECT_TRUE(column_seen(seen, u)) << "column " << u;
+  const double share = seen.to(torch::kFloat64).mean().item<double>();
+  EXPECT_NEAR(share, 38.0 / 64.0, 3.0 / 64.0);  // 64 columns - 16 outside - 10 hidden
+
+  // A source on the other side sees the first columns (16 px further right); columns 46-55 stay
+  // unseen: hidden in the right source, outside the left one.
+  const auto either = covisible_by_ground_truth(wall, camera_at(0.0), {right, left});
+  for (int u : {0, 8, 30, 60}) EXPECT_TRUE(column_seen(either, u)) << "column " << u;
+  EXPECT_TRUE(column_unseen(either, 50));
+  // No ground truth in the reference, no covisible pixel.
+  EXPECT_FALSE(covisible_by_ground_truth(torch::zeros_like(wall), camera_at(0.0), {right}).any().item<bool>());
+}
+
 }  // namespace
 }  // namespace umvs

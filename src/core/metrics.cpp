@@ -10,6 +10,8 @@
 #include <stdexcept>
 #include <unordered_map>
 
+#include "unsup_mvs/core/fusion.h"
+
 namespace umvs {
 
 namespace {
@@ -125,6 +127,25 @@ torch::Tensor sample_depth_at_camera(const torch::Tensor& gt_in, const Camera& g
     }
   }
   return out;
+}
+
+torch::Tensor covisible_by_ground_truth(const torch::Tensor& ref_gt_in, const Camera& ref_camera,
+                                        const std::vector<DepthView>& sources, double max_relative_depth) {
+  if (ref_gt_in.dim() != 2) throw std::invalid_argument("covisible_by_ground_truth: ground truth must be [H,W]");
+  const auto ref_gt = ref_gt_in.detach().to(torch::kCPU, torch::kFloat32).contiguous();
+  const auto has_depth = [](const torch::Tensor& d) { return torch::isfinite(d) & (d > 0); };
+  const auto ref_valid = has_depth(ref_gt);
+  FusionConfig round_trip;
+  round_trip.min_confidence = 0.0;
+  round_trip.max_relative_depth = max_relative_depth;
+  round_trip.validate();
+  auto seen = torch::zeros_like(ref_valid);
+  for (const auto& src : sources) {
+    if (src.depth.dim() != 2) throw std::invalid_argument("covisible_by_ground_truth: source ground truth must be [H,W]");
+    const auto src_gt = src.depth.detach().to(torch::kCPU, torch::kFloat32).contiguous();
+    seen |= check_consistency(ref_gt, ref_valid, ref_camera, src_gt, has_depth(src_gt), src.camera, round_trip).agree;
+  }
+  return seen & ref_valid;
 }
 
 // ---------------------------------------------------------------------------------------------

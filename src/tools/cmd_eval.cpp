@@ -1,6 +1,7 @@
 // umvs eval depth|cloud: depth-map and point-cloud metrics against ground truth (core/metrics.h).
 #include <torch/torch.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -83,7 +84,10 @@ int eval_depth(int argc, char** argv) {
                   "An estimate at another resolution (MVSNet's 1/4) is compared at its own pixels: each looks up\n"
                   "the nearest ground-truth pixel through the two cameras (EST/cams/XXXXXXXX_cam.txt, same pose),\n"
                   "i.e. pixel (4i, 4j) for umvs infer output. Errors count pixels where both are valid;\n"
-                  "completeness is the share of valid ground-truth pixels that have a valid estimate.");
+                  "completeness is the share of valid ground-truth pixels that have a valid estimate.\n"
+                  "--covisibility-sources N adds rows for the pixels that one of the view's first N neighbours in\n"
+                  "GT/pair.txt sees (seen) and for the others (unseen), decided on the ground truth of both views:\n"
+                  "where the network had something to match, and where it could only guess.");
   args.required("est", "estimate folder")
       .required("gt", "ground-truth folder (depth_gt/, cams/)")
       .option("est-subdir", "", "subfolder of EST with the depth maps (default: depth_est, depth_gt or depth)")
@@ -91,6 +95,9 @@ int eval_depth(int argc, char** argv) {
       .option("rel-thresholds", "0.01,0.03", "relative error thresholds (comma-separated)")
       .option("abs-thresholds", "0.001,0.003", "absolute error thresholds in scene units (comma-separated)")
       .option("views", "", "comma-separated view ids (default: every estimate)")
+      .option("covisibility-sources", "0",
+              "split the errors by whether the first N neighbours in GT/pair.txt see the pixel (2 = umvs infer's "
+              "default --views 3); 0 = off")
       .flag("json", "print JSON instead of a table");
   if (!args.parse(argc, argv)) return 0;
   umvs::configure_threads(0);
@@ -100,6 +107,28 @@ int eval_depth(int argc, char** argv) {
   const std::string est_root = args.str("est"), gt_root = args.str("gt");
   const std::string est_dir = find_depth_dir(est_root, args.str("est-subdir"));
   const double min_conf = args.real("min-confidence");
+  const int covisibility_sources = args.integer("covisibility-sources");
+  if (covisibility_sources < 0) throw std::invalid_argument("--covisibility-sources must be >= 0");
+  std::vector<umvs::ViewPair> pairs;
+  if (covisibility_sources > 0) {
+    const std::string pair_path = gt_root + "/pair.txt";
+    if (!fs::exists(pair_path)) throw std::runtime_error("--covisibility-sources needs " + pair_path);
+    pairs = umvs::read_pair_file(pair_path);
+  }
+  // The ground truth of view `id` and its camera at the ground truth's own size.
+  const auto read_ground_truth = [&](int id) {
+    const std::string stem = umvs::view_file_stem(id);
+    const std::string depth_path = gt_root + "/depth_gt/" + stem + ".pfm";
+    const std::string cam_path = gt_root + "/cams/" + stem + "_cam.txt";
+    if (!fs::exists(depth_path)) throw std::runtime_error("no ground truth " + depth_path + " for view " + std::to_string(id));
+    umvs::DepthView view{umvs::read_pfm(depth_path), {}};
+    if (fs::exists(cam_path)) {
+      view.camera = umvs::read_cam_file(cam_path).camera;
+      view.camera.width = static_cast<int>(view.depth.size(1));
+      view.camera.height = static_cast<int>(view.depth.size(0));
+    }
+    return view;
+  };
 
   std::vector<int> ids = args.integers("views");
   if (ids.empty()) {
@@ -114,24 +143,23 @@ int eval_depth(int argc, char** argv) {
   }
   if (ids.empty()) throw std::runtime_error("no depth maps XXXXXXXX.pfm in " + est_dir);
 
-  std::vector<umvs::DepthMetrics> per_view;
-  std::vector<std::string> notes;
+  std::vector<umvs::DepthMetrics> per_view, per_view_seen, per_view_unseen;
   for (int id : ids) {
     const std::string stem = umvs::view_file_stem(id);
     const std::string est_path = est_dir + "/" + stem + ".pfm";
-    const std::string gt_path = gt_root + "/depth_gt/" + stem + ".pfm";
     if (!fs::exists(est_path)) throw std::runtime_error("no estimate " + est_path);
-    if (!fs::exists(gt_path)) throw std::runtime_error("no ground truth " + gt_path + " for view " + std::to_string(id));
     torch::Tensor est = umvs::read_pfm(est_path);
-    torch::Tensor gt = umvs::read_pfm(gt_path);
+    const umvs::DepthView ground_truth = read_ground_truth(id);
+    torch::Tensor gt = ground_truth.depth;
     const std::string est_cam = umvs::InferenceFolder(est_root).cam_path(id);
     const std::string gt_cam = gt_root + "/cams/" + stem + "_cam.txt";
+    umvs::Camera gt_camera_at_estimate = ground_truth.camera;  // the camera of `gt` once it has the estimate's size
     if (fs::exists(est_cam) && fs::exists(gt_cam)) {
-      auto ce = umvs::read_cam_file(est_cam).camera, cg = umvs::read_cam_file(gt_cam).camera;
+      auto ce = umvs::read_cam_file(est_cam).camera;
+      const auto& cg = ground_truth.camera;
       ce.width = static_cast<int>(est.size(1));
       ce.height = static_cast<int>(est.size(0));
-      cg.width = static_cast<int>(gt.size(1));
-      cg.height = static_cast<int>(gt.size(0));
+      gt_camera_at_estimate = ce;
       try {
         gt = umvs::sample_depth_at_camera(gt, cg, ce);
       } catch (const std::invalid_argument& e) {
@@ -152,8 +180,30 @@ int eval_depth(int argc, char** argv) {
       valid = conf >= min_conf;
     }
     per_view.push_back(umvs::evaluate_depth(est, gt, valid, cfg));
+    if (covisibility_sources > 0) {
+      if (!fs::exists(gt_cam)) throw std::runtime_error("--covisibility-sources needs the camera " + gt_cam);
+      const auto pair = std::find_if(pairs.begin(), pairs.end(), [id](const umvs::ViewPair& p) { return p.ref == id; });
+      if (pair == pairs.end()) throw std::runtime_error("view " + std::to_string(id) + " has no line in " + gt_root + "/pair.txt");
+      std::vector<umvs::DepthView> sources;
+      for (size_t i = 0; i < pair->sources.size() && static_cast<int>(i) < covisibility_sources; ++i) {
+        sources.push_back(read_ground_truth(pair->sources[i]));
+        if (sources.back().camera.width == 0) {
+          throw std::runtime_error("--covisibility-sources needs the camera of view " + std::to_string(pair->sources[i]));
+        }
+      }
+      const auto seen = umvs::covisible_by_ground_truth(gt, gt_camera_at_estimate, sources);
+      per_view_seen.push_back(umvs::evaluate_depth(est, gt.where(seen, torch::zeros_like(gt)), valid, cfg));
+      per_view_unseen.push_back(umvs::evaluate_depth(est, gt.where(~seen, torch::zeros_like(gt)), valid, cfg));
+    }
   }
   const umvs::DepthMetrics all = umvs::combine_depth_metrics(per_view);
+  const bool split = covisibility_sources > 0;
+  const umvs::DepthMetrics seen = split ? umvs::combine_depth_metrics(per_view_seen) : umvs::DepthMetrics{};
+  const umvs::DepthMetrics unseen = split ? umvs::combine_depth_metrics(per_view_unseen) : umvs::DepthMetrics{};
+  // Share of the ground-truth pixels that a source sees.
+  const auto seen_share = [](const umvs::DepthMetrics& s, const umvs::DepthMetrics& u) {
+    return s.gt_pixels + u.gt_pixels > 0 ? static_cast<double>(s.gt_pixels) / (s.gt_pixels + u.gt_pixels) : 0.0;
+  };
 
   if (args.on("json")) {
     nlohmann::ordered_json out = {{"rel_thresholds", cfg.rel_thresholds}, {"abs_thresholds", cfg.abs_thresholds}};
@@ -161,9 +211,20 @@ int eval_depth(int argc, char** argv) {
     for (size_t i = 0; i < ids.size(); ++i) {
       nlohmann::ordered_json view = {{"view", ids[i]}};
       view.update(depth_json(per_view[i]));
+      if (split) {
+        view["seen_share"] = seen_share(per_view_seen[i], per_view_unseen[i]);
+        view["seen"] = depth_json(per_view_seen[i]);
+        view["unseen"] = depth_json(per_view_unseen[i]);
+      }
       out["views"].push_back(view);
     }
     out["overall"] = depth_json(all);
+    if (split) {
+      out["covisibility_sources"] = covisibility_sources;
+      out["overall"]["seen_share"] = seen_share(seen, unseen);
+      out["seen"] = depth_json(seen);
+      out["unseen"] = depth_json(unseen);
+    }
     std::cout << out.dump(1) << "\n";
     return 0;
   }
@@ -187,6 +248,12 @@ int eval_depth(int argc, char** argv) {
   };
   for (size_t i = 0; i < ids.size(); ++i) row(std::to_string(ids[i]), per_view[i]);
   row("overall", all);
+  if (split) {
+    row("seen", seen);
+    row("unseen", unseen);
+    std::printf("seen: %s %% of the ground-truth pixels lie in one of the first %d neighbours' views, unhidden\n",
+                pct(seen_share(seen, unseen)).c_str(), covisibility_sources);
+  }
   return 0;
 }
 

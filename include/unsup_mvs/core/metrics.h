@@ -56,6 +56,22 @@ DepthMetrics combine_depth_metrics(const std::vector<DepthMetrics>& parts);
 // std::invalid_argument when the two cameras' poses differ (rotation or centre).
 torch::Tensor sample_depth_at_camera(const torch::Tensor& gt, const Camera& gt_camera, const Camera& est_camera);
 
+// Which pixels of a reference view some source view also sees, decided on ground truth alone:
+// the pixel's ground-truth point passes fusion's round trip (check_consistency at 1 px and
+// max_relative_depth) against at least one source's ground truth, so it lies inside that source
+// and is not hidden there. Splits depth errors into those where multi-view stereo had something
+// to match and those where it could only guess. 3 %, not fusion's 1 %: the ground truth of two
+// far-apart views of a slanted wall differs by 1-3 % after the round trip (the living room's
+// frames 4 and 1), and an occluder is much farther off than that.
+//   ref_gt [h,w] (0 = no ground truth) seen by ref_camera; sources: [Hs,Ws] ground truth with its
+//   camera.  -> [h,w] bool
+struct DepthView {
+  torch::Tensor depth;
+  Camera camera;
+};
+torch::Tensor covisible_by_ground_truth(const torch::Tensor& ref_gt, const Camera& ref_camera,
+                                        const std::vector<DepthView>& sources, double max_relative_depth = 0.03);
+
 // ---------------------------------------------------------------------------------------------
 // Point clouds
 
