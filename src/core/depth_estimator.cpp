@@ -17,6 +17,16 @@ Camera depth_map_camera(const Camera& network_camera, double scale) {
   return c;
 }
 
+const char* to_string(SourceCombination c) {
+  return c == SourceCombination::kMostConfident ? "most_confident" : "variance";
+}
+
+SourceCombination source_combination_from_string(const std::string& s) {
+  if (s == "variance") return SourceCombination::kVariance;
+  if (s == "most_confident") return SourceCombination::kMostConfident;
+  throw std::invalid_argument("unknown source combination '" + s + "' (expected variance|most_confident)");
+}
+
 namespace {
 MvsNet moved_to(MvsNet model, const torch::Device& device) {
   model->to(device);
@@ -68,7 +78,18 @@ DepthMap DepthEstimator::estimate(const std::vector<ViewInput>& views, double de
     torch::NoGradGuard no_grad;
     auto batch = torch::stack(images).unsqueeze(0).to(device_);
     auto proj = mvsnet_projection_matrices(cameras).unsqueeze(0).to(device_);
-    out = network_.forward(batch, proj, depth_values.unsqueeze(0).to(device_), false, &map.stages);
+    const auto planes = depth_values.unsqueeze(0).to(device_);
+    out = network_.forward(batch, proj, planes, false, &map.stages);
+    const int64_t num_views = batch.size(1);
+    if (config_.source_combination == SourceCombination::kMostConfident && num_views > 2) {
+      for (int64_t s = 1; s < num_views; ++s) {
+        const auto pair = torch::tensor({int64_t{0}, s}, torch::TensorOptions().dtype(torch::kLong).device(device_));
+        const MvsOutput alone = network_.forward(batch.index_select(1, pair), proj.index_select(1, pair), planes, false);
+        const auto better = alone.confidence > out.confidence;
+        out.depth = torch::where(better, alone.depth, out.depth);
+        out.confidence = torch::where(better, alone.confidence, out.confidence);
+      }
+    }
   }
   map.depth = out.depth.squeeze(0).to(torch::kCPU);
   map.confidence = out.confidence.squeeze(0).to(torch::kCPU);

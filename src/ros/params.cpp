@@ -87,6 +87,9 @@ InferenceNodeConfig inference_node_config_from_ros(const ros::NodeHandle& nh) {
   nh.param("num_depth", c.estimator.num_depth, c.estimator.num_depth);
   nh.param("max_width", c.estimator.max_width, c.estimator.max_width);
   nh.param("max_height", c.estimator.max_height, c.estimator.max_height);
+  std::string source_combination = umvs::to_string(c.estimator.source_combination);
+  nh.param("source_combination", source_combination, source_combination);
+  c.estimator.source_combination = umvs::source_combination_from_string(source_combination);
   nh.param("rectified", c.rectified, c.rectified);
   nh.param("checkpoint", c.checkpoint, c.checkpoint);
   nh.param("max_image_pixels", c.max_image_pixels, c.max_image_pixels);

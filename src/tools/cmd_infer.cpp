@@ -49,6 +49,9 @@ UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
       .required("checkpoint", "model: our checkpoint or MVSNet_pytorch weights")
       .required("out", "output folder")
       .option("views", "3", "views per depth map (reference + neighbours)")
+      .option("source-combination", "variance",
+              "variance: one pass, MVSNet's variance over all views; most_confident: also one pass per source with "
+              "the reference alone, keeping each pixel's most confident estimate (for far-apart views; 1 + neighbours passes)")
       .option("num-depth", "0", "depth planes (multiple of 8; 0 = 128 at 640 wide, scaled with the width)")
       .option("depth-sampling", "", "depth|inverse_depth (default: the checkpoint's)")
       .option("feature-warp", "", "exact|mvsnet_pytorch: where the cost volume samples the source views (default: the checkpoint's)")
@@ -65,6 +68,7 @@ UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
   const auto device = umvs::parse_device(args.str("device"));
   const int views = args.integer("views");
   if (views < 2) throw std::invalid_argument("--views must be at least 2");
+  const auto source_combination = umvs::source_combination_from_string(args.str("source-combination"));
   const double depth_min_option = depth_override(args, "depth-min"), depth_max_option = depth_override(args, "depth-max");
   if (depth_min_option > 0 && depth_max_option > 0 && depth_max_option <= depth_min_option) {
     throw std::invalid_argument("impossible depth range: --depth-max " + args.str("depth-max") + " <= --depth-min " +
@@ -76,6 +80,7 @@ UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
   if (args.given("depth-sampling")) loaded.model->set_depth_sampling(umvs::depth_sampling_from_string(args.str("depth-sampling")));
   if (args.given("feature-warp")) loaded.model->set_feature_warp(umvs::feature_warp_from_string(args.str("feature-warp")));
   umvs::DepthEstimatorConfig cfg;
+  cfg.source_combination = source_combination;
   cfg.max_width = args.integer("max-width");
   cfg.max_height = args.integer("max-height");
 

@@ -6,6 +6,7 @@
 
 #include <torch/types.h>
 
+#include <string>
 #include <vector>
 
 #include "unsup_mvs/core/camera.h"
@@ -19,10 +20,21 @@ struct ViewInput {
   Camera camera;        // width/height must match the image
 };
 
+// How the source views make one depth map.
+//  kVariance: one pass over all views, MVSNet's variance cost volume.
+//  kMostConfident: that pass, plus one pass per source with the reference alone; each pixel keeps
+//    the estimate of highest confidence. A source that sees another part of the scene, or sees
+//    it from too far off, then cannot spoil the variance for the other sources at the pixels
+//    where it is wrong. One pass more per source (3 instead of 1 for 2 sources).
+enum class SourceCombination { kVariance, kMostConfident };
+const char* to_string(SourceCombination c);
+SourceCombination source_combination_from_string(const std::string& s);  // "variance" | "most_confident"
+
 struct DepthEstimatorConfig {
   int max_width = 0;   // 0 = no limit; images are scaled down to fit, then cropped to multiples of 32
   int max_height = 0;
   int num_depth = 0;   // 0 = the model's config
+  SourceCombination source_combination = SourceCombination::kVariance;
 };
 
 struct DepthMap {
@@ -32,8 +44,8 @@ struct DepthMap {
   Camera camera;             // camera of the depth map: pixel (i,j) <-> network input pixel (4i,4j)
   Camera network_camera;     // camera of the network input image (after resize and crop)
   double depth_min = 0.0, depth_max = 0.0;
-  double seconds = 0.0;      // network time, including transfers
-  MvsStageTimes stages;      // where the network time went (CPU fast path only)
+  double seconds = 0.0;      // network time, including transfers (all passes)
+  MvsStageTimes stages;      // where the first pass's network time went (CPU fast path only)
 };
 
 class DepthEstimator {
