@@ -40,6 +40,15 @@ std::string write_room(const std::string& name, uint64_t seed, bool keep_ground_
   return dir;
 }
 
+// Tuples at 128x96, write_room's size, with views_loss loss views.
+TupleConfig room_tuples(int views_loss) {
+  TupleConfig cfg;
+  cfg.views_loss = views_loss;
+  cfg.width = 128;
+  cfg.height = 96;
+  return cfg;
+}
+
 TEST(SupervisedLoss, CountsErrorsInDepthIntervalsForBothSamplings) {
   // An estimate k planes away from the truth costs smooth L1 of k: k - 0.5 beyond one interval,
   // k^2 / 2 within it, whatever the sampling and the scene's scale.
@@ -116,10 +125,7 @@ TEST(SupervisedLoss, GradientMatchesFiniteDifferences) {
 
 TEST(SupervisedLoss, SupervisedFolderWithoutGroundTruthIsRefusedByName) {
   const std::string dir = write_room("sup_no_gt", 3, /*keep_ground_truth=*/false);
-  TupleConfig cfg;
-  cfg.views_loss = 4;
-  cfg.width = 128;
-  cfg.height = 96;
+  TupleConfig cfg = room_tuples(4);
   cfg.supervised = true;
   EXPECT_THAT([&] { MvsFolderSource source({dir}, cfg); },
               testing::ThrowsMessage<std::runtime_error>(testing::AllOf(testing::HasSubstr("depth_gt"), testing::HasSubstr(dir))));
@@ -208,10 +214,7 @@ TEST(InputNormalization, MakesTheNetworkBlindToExposureGainAndWhiteBalance) {
   // Trained weights on a rendered room, and the same room at 0.3x exposure with a colour cast:
   // the same depth with per-image normalisation, a clearly different one without it.
   const std::string dir = write_room("normalisation", 71, true);
-  TupleConfig cfg;
-  cfg.views_loss = 2;
-  cfg.width = 128;
-  cfg.height = 96;
+  TupleConfig cfg = room_tuples(2);
   const auto t = MvsFolderSource({dir}, cfg).tuple(0, nullptr);
   const auto b = make_training_batch({t}, 32, DepthSampling::kUniformDepth, torch::kCPU);
   const auto cast = b.images * torch::tensor({0.3, 0.25, 0.35}).view({1, 1, 3, 1, 1});
@@ -248,10 +251,7 @@ TEST(InputNormalization, NamesRoundTripAndBadNamesAreRefused) {
 
 TEST(ExposureAugmentation, DarkensWholeTuplesWithinTheGainRange) {
   const std::string dir = write_room("exposure", 31, true);
-  TupleConfig cfg;
-  cfg.views_loss = 4;
-  cfg.width = 128;
-  cfg.height = 96;
+  TupleConfig cfg = room_tuples(4);
   cfg.max_zoom = 1.0;
   cfg.jitter = 0.0;
   MvsFolderSource plain({dir}, cfg);
@@ -291,10 +291,7 @@ TEST(SelfTraining, PseudoLabelsAreTheAccuratePixels) {
   // The pixels the views agree on are far more accurate than the model's depth elsewhere: that is
   // what makes them labels. Scored against the rendered ground truth (which labelling never reads).
   const std::string dir = write_room("pseudo_accuracy", 41, true);
-  TupleConfig cfg;
-  cfg.views_loss = 4;
-  cfg.width = 128;
-  cfg.height = 96;
+  TupleConfig cfg = room_tuples(4);
   MvsFolderSource with_gt({dir}, cfg);
   cfg.read_ground_truth = false;
   MvsFolderSource blind({dir}, cfg);
@@ -393,10 +390,7 @@ TEST(AdaptationJudge, FindsEvidenceOnSparseViewsAndRanksWorseDepthLower) {
   // keyframes. The judge still confirms a share of the trained model's depth above the trainer
   // node's 1 % evidence floor, and far less of the depth of the same network untrained.
   const std::string dir = write_room("judge_sparse", 43, false);
-  TupleConfig cfg;
-  cfg.views_loss = 2;
-  cfg.width = 128;
-  cfg.height = 96;
+  TupleConfig cfg = room_tuples(2);
   const auto tuples = fixed_tuples(MvsFolderSource({dir}, cfg), 0);  // all, unaugmented
   auto trained = load_model(default_model(), torch::kCPU).model;
   torch::manual_seed(1);
@@ -414,10 +408,7 @@ TEST(DefaultModel, DepthIgnoresExposure) {
   // A camera recording everything at 0.3x brightness (quantised to 8 bits like a real dark
   // camera) gets the same depth from the shipped model: median change < 1 %.
   const std::string dir = write_room("exposure_default_model", 61, true);
-  TupleConfig cfg;
-  cfg.views_loss = 2;
-  cfg.width = 128;
-  cfg.height = 96;
+  TupleConfig cfg = room_tuples(2);
   MvsFolderSource source({dir}, cfg);
   auto loaded = load_model(default_model(), torch::kCPU);
   DepthEstimator estimator(loaded.model, torch::kCPU);
@@ -441,10 +432,7 @@ TEST(DefaultModel, MostConfidentSourcesResistASourceThatSeesSomethingElse) {
   // reference with the first source alone). With SourceCombination::kMostConfident the pass of
   // the reference and the first source wins where it is more confident: 0.517.
   const std::string dir = write_room("most_confident_sources", 71, true);
-  TupleConfig cfg;
-  cfg.views_loss = 2;
-  cfg.width = 128;
-  cfg.height = 96;
+  TupleConfig cfg = room_tuples(2);
   MvsFolderSource source({dir}, cfg);
   auto loaded = load_model(default_model(), torch::kCPU);
   DepthEstimator variance(loaded.model, torch::kCPU);
