@@ -168,8 +168,9 @@ int eval_depth(int argc, char** argv) {
     } else if (est.sizes() != gt.sizes()) {
       throw std::invalid_argument("view " + std::to_string(id) + ": estimate " + std::to_string(est.size(1)) + "x" +
                                   std::to_string(est.size(0)) + " and ground truth " + std::to_string(gt.size(1)) + "x" +
-                                  std::to_string(gt.size(0)) + " differ in size and " + est_cam +
-                                  " is missing: give the estimate's camera to compare them");
+                                  std::to_string(gt.size(0)) + " differ in size and " +
+                                  (fs::exists(est_cam) ? gt_cam : est_cam) +
+                                  " is missing: both cameras are needed to compare them");
     }
     torch::Tensor valid;
     if (min_conf > 0) {
@@ -181,7 +182,7 @@ int eval_depth(int argc, char** argv) {
     }
     per_view.push_back(umvs::evaluate_depth(est, gt, valid, cfg));
     if (covisibility_sources > 0) {
-      if (!fs::exists(gt_cam)) throw std::runtime_error("--covisibility-sources needs the camera " + gt_cam);
+      if (ground_truth.camera.width == 0) throw std::runtime_error("--covisibility-sources needs the camera " + gt_cam);
       const auto pair = std::find_if(pairs.begin(), pairs.end(), [id](const umvs::ViewPair& p) { return p.ref == id; });
       if (pair == pairs.end()) throw std::runtime_error("view " + std::to_string(id) + " has no line in " + gt_root + "/pair.txt");
       std::vector<umvs::DepthView> sources;
