@@ -1,6 +1,8 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <cmath>
+
 #include "unsup_mvs/core/camera.h"
 #include "unsup_mvs/core/view_selection.h"
 
@@ -32,6 +34,24 @@ TEST(Camera, ProjectBackprojectRoundTrip) {
     }
   }
   EXPECT_FALSE(c.project(c.center() - c.viewing_direction(), nullptr));
+}
+
+TEST(Camera, TurnedKeepsTheCentreAndTurnsTheView) {
+  // Turning by 1 degree about the camera's own y axis keeps its centre, and moves the image of a
+  // far point on the optical axis by fx * tan(1 degree) pixels along x.
+  const Camera c = make_camera();
+  const double angle = M_PI / 180.0;
+  const Camera turned = c.turned(Eigen::Vector3d(0, angle, 0));
+  EXPECT_LT((turned.center() - c.center()).norm(), 1e-12);
+  EXPECT_NEAR(rotation_angle(turned.R(), c.R()), angle, 1e-12);
+  const Eigen::Vector3d far_point = c.backproject(319.5, 239.5, 1e6);
+  Eigen::Vector2d before, after;
+  ASSERT_TRUE(c.project(far_point, &before));
+  ASSERT_TRUE(turned.project(far_point, &after));
+  EXPECT_NEAR(after.x() - before.x(), 500.0 * std::tan(angle), 1e-3);
+  EXPECT_NEAR(after.y(), before.y(), 1e-6);
+  const Camera same = c.turned(Eigen::Vector3d::Zero());
+  EXPECT_EQ(same.T_cam_world, c.T_cam_world);
 }
 
 TEST(Camera, ResizeMapsPixelCentres) {

@@ -16,6 +16,15 @@ Eigen::Matrix4d Camera::T_world_cam() const {
 
 Eigen::Vector3d Camera::center() const { return -R().transpose() * t(); }
 
+Camera Camera::turned(const Eigen::Vector3d& angles) const {
+  Camera out = *this;
+  const double angle = angles.norm();
+  if (angle == 0.0) return out;
+  const Eigen::Matrix3d turn = Eigen::AngleAxisd(angle, angles / angle).toRotationMatrix();
+  out.T_cam_world.topRows<3>() = turn * T_cam_world.topRows<3>();  // X_cam' = turn * X_cam: the centre stays
+  return out;
+}
+
 Eigen::Vector3d Camera::viewing_direction() const { return R().row(2).transpose(); }
 
 Eigen::Matrix<double, 3, 4> Camera::projection() const {

@@ -45,6 +45,9 @@ struct Camera {
   Camera resized(int new_width, int new_height) const;
   // The same camera for the crop whose top-left pixel is (x0, y0) of this image.
   Camera cropped(int x0, int y0, int new_width, int new_height) const;
+  // This camera turned about its own centre by the rotation vector `angles` (radians, axis times
+  // angle, in this camera's frame).
+  Camera turned(const Eigen::Vector3d& angles) const;
 
   // Throws std::invalid_argument naming the problem: non-finite values, zero focal length,
   // K not upper triangular with K(2,2) = 1, a rotation that is not orthonormal, bad image size.
