@@ -25,14 +25,14 @@
 namespace umvs {
 namespace {
 
-std::string write_room(const std::string& name, uint64_t seed, bool keep_ground_truth) {
+std::string write_room(const std::string& name, uint64_t seed, bool keep_ground_truth, int width = 128, int height = 96) {
   const std::string dir = test::temp_dir(name);
   SynthConfig cfg;
   cfg.scene = SynthSceneType::kRoom;
   cfg.seed = seed;
   cfg.num_views = 6;
-  cfg.width = 128;
-  cfg.height = 96;
+  cfg.width = width;
+  cfg.height = height;
   cfg.lighting_change = false;
   cfg.supersample = 1;
   cfg.gt_cloud_samples = 0;
@@ -42,12 +42,17 @@ std::string write_room(const std::string& name, uint64_t seed, bool keep_ground_
 }
 
 // Tuples at 128x96, write_room's size, with views_loss loss views.
-TupleConfig room_tuples(int views_loss) {
+TupleConfig room_tuples(int views_loss, int width = 128, int height = 96) {
   TupleConfig cfg;
   cfg.views_loss = views_loss;
-  cfg.width = 128;
-  cfg.height = 96;
+  cfg.width = width;
+  cfg.height = height;
   return cfg;
+}
+
+// abs rel of a depth map against full-resolution ground truth, on the depth grid (4i, 4j)
+double abs_rel_on_depth_grid(const torch::Tensor& est, const torch::Tensor& gt_full) {
+  return evaluate_depth(est, gt_full.slice(0, 0, gt_full.size(0), 4).slice(1, 0, gt_full.size(1), 4), {}).abs_rel;
 }
 
 TEST(SupervisedLoss, CountsErrorsInDepthIntervalsForBothSamplings) {
@@ -440,9 +445,7 @@ TEST(DefaultModel, MostConfidentSourcesResistASourceThatSeesSomethingElse) {
   DepthEstimatorConfig most_confident_config;
   most_confident_config.source_combination = SourceCombination::kMostConfident;
   DepthEstimator most_confident(loaded.model, torch::kCPU, most_confident_config);
-  const auto abs_rel = [](const torch::Tensor& est, const torch::Tensor& gt_full) {  // on the depth grid, (4i, 4j)
-    return evaluate_depth(est, gt_full.slice(0, 0, gt_full.size(0), 4).slice(1, 0, gt_full.size(1), 4), {}).abs_rel;
-  };
+  const auto abs_rel = abs_rel_on_depth_grid;
   double spoiled_variance = 0, spoiled_most_confident = 0, clean_pair = 0;
   for (size_t i = 0; i < source.size(); i += 2) {
     const auto t = source.tuple(i, nullptr);
@@ -464,6 +467,68 @@ TEST(DefaultModel, MostConfidentSourcesResistASourceThatSeesSomethingElse) {
   EXPECT_LT(spoiled_most_confident, 1.1 * clean_pair) << "spoiled variance " << spoiled_variance;
   EXPECT_THROW(source_combination_from_string("bogus"), std::invalid_argument);
   EXPECT_EQ(source_combination_from_string(to_string(SourceCombination::kMostConfident)), SourceCombination::kMostConfident);
+}
+
+TEST(SearchRotation, ClimbsToThePeakWithinTheLimit) {
+  const Eigen::Vector3d peak(0.6, -0.3, 0.1);
+  const auto score = [&](const Eigen::Vector3d& degrees) { return -(degrees - peak).squaredNorm(); };
+  const RotationSearch found = search_rotation(score, 2.0);
+  EXPECT_LT((found.degrees - peak).norm(), 1e-9) << found.degrees.transpose();
+  EXPECT_NEAR(found.score, 0.0, 1e-12);
+  EXPECT_NEAR(found.start_score, -peak.squaredNorm(), 1e-12);
+  EXPECT_LT(found.evaluations, 60);
+  // A peak beyond the limit: the search stops at the limit, on the peak's side.
+  const Eigen::Vector3d far_peak(3.0, 0.0, 0.0);
+  const Eigen::Vector3d bounded =
+      search_rotation([&](const Eigen::Vector3d& d) { return -(d - far_peak).squaredNorm(); }, 1.0).degrees;
+  EXPECT_NEAR(bounded.x(), 1.0, 1e-9);
+  EXPECT_LT(bounded.tail<2>().norm(), 1e-9);
+  // A flat score: no turn at all.
+  EXPECT_EQ(search_rotation([](const Eigen::Vector3d&) { return 1.0; }, 2.0).degrees, Eigen::Vector3d::Zero());
+  DepthEstimatorConfig bad;
+  bad.source_rotation_search_deg = -1;
+  EXPECT_THROW(bad.validate(), std::invalid_argument);
+  bad.source_rotation_search_deg = std::nan("");
+  EXPECT_THROW(bad.validate(), std::invalid_argument);
+}
+
+TEST(DefaultModel, SourceRotationSearchUndoesASourcePoseError) {
+  // Each reference's first source camera is turned by (0.6, -0.5, 0.3) degrees, a pose error of a
+  // few pixels at 320 wide, as odometry makes: the cost volume compares the wrong pixels and the
+  // depth gets worse (abs rel summed over 2 references 0.291 against 0.165). The label-free
+  // rotation search turns it back, and the depth is as good as with the exact pose (0.165); it
+  // leaves exact poses as they are.
+  const std::string dir = write_room("rotation_search", 81, true, 320, 256);
+  MvsFolderSource source({dir}, room_tuples(2, 320, 256));
+  auto loaded = load_model(default_model(), torch::kCPU);
+  DepthEstimator plain(loaded.model, torch::kCPU);
+  DepthEstimatorConfig search_config;
+  search_config.source_rotation_search_deg = 2.0;
+  DepthEstimator searching(loaded.model, torch::kCPU, search_config);
+  const Eigen::Vector3d error_deg(0.6, -0.5, 0.3);
+  double exact = 0, off = 0, corrected = 0, exact_searched = 0;
+  for (size_t i = 0; i < source.size(); i += 3) {
+    const auto t = source.tuple(i, nullptr);
+    ASSERT_EQ(t.network_views.size(), 3u);
+    std::vector<ViewInput> posed_off = t.network_views;
+    posed_off[1].camera = posed_off[1].camera.turned(error_deg * M_PI / 180.0);
+    exact += abs_rel_on_depth_grid(plain.estimate(t.network_views, t.depth_min, t.depth_max).depth, t.depth_gt);
+    off += abs_rel_on_depth_grid(plain.estimate(posed_off, t.depth_min, t.depth_max).depth, t.depth_gt);
+    const DepthMap fixed = searching.estimate(posed_off, t.depth_min, t.depth_max);
+    corrected += abs_rel_on_depth_grid(fixed.depth, t.depth_gt);
+    ASSERT_EQ(fixed.source_turns_deg.size(), 2u);
+    EXPECT_LT((fixed.source_turns_deg[0] + error_deg).norm(), 0.35) << "turn found " << fixed.source_turns_deg[0].transpose();
+    const DepthMap unchanged = searching.estimate(t.network_views, t.depth_min, t.depth_max);
+    exact_searched += abs_rel_on_depth_grid(unchanged.depth, t.depth_gt);
+    EXPECT_LT(unchanged.source_turns_deg[0].norm(), 0.35) << "an exact pose turned by " << unchanged.source_turns_deg[0].transpose();
+  }
+  RecordProperty("exact", std::to_string(exact));
+  RecordProperty("off", std::to_string(off));
+  RecordProperty("corrected", std::to_string(corrected));
+  RecordProperty("exact_searched", std::to_string(exact_searched));
+  EXPECT_GT(off, 1.2 * exact) << "the pose error must matter for this test to mean anything";
+  EXPECT_LT(corrected, 1.1 * exact) << "off " << off;
+  EXPECT_LT(exact_searched, 1.1 * exact);
 }
 
 }  // namespace

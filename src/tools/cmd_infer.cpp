@@ -2,6 +2,7 @@
 #include <torch/torch.h>
 
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <iostream>
 #include <map>
@@ -52,6 +53,10 @@ UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
       .option("source-combination", "variance",
               "variance: one pass, MVSNet's variance over all views; most_confident: also one pass per source with "
               "the reference alone, keeping each pixel's most confident estimate (for far-apart views; 1 + neighbours passes)")
+      .option("source-rotation-search", "0",
+              "correct each source's orientation by up to this many degrees about each axis: the turn with which "
+              "the source warps best onto the reference, kept when clearly better than the pose as given (poses a "
+              "few tenths of a degree off; about 30 half-size passes per source; 0 = off)")
       .option("num-depth", "0", "depth planes (multiple of 8; 0 = 128 at 640 wide, scaled with the width)")
       .option("depth-sampling", "", "depth|inverse_depth (default: the checkpoint's)")
       .option("feature-warp", "", "exact|mvsnet_pytorch: where the cost volume samples the source views (default: the checkpoint's)")
@@ -83,6 +88,7 @@ UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
   cfg.source_combination = source_combination;
   cfg.max_width = args.integer("max-width");
   cfg.max_height = args.integer("max-height");
+  cfg.source_rotation_search_deg = args.real("source-rotation-search");
 
   std::vector<int> refs = args.integers("ref");
   if (refs.empty()) {
@@ -106,7 +112,7 @@ UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
   const umvs::PlaneCount planes = umvs::choose_plane_count(args.integer("num-depth"), "--num-depth", plan.width,
                                                            plan.height, loaded.model->config().num_depth);
   cfg.num_depth = planes.planes;
-  umvs::DepthEstimator estimator(loaded.model, device, cfg);
+  umvs::DepthEstimator estimator(loaded.model, device, cfg);  // refuses a bad --source-rotation-search
   std::cerr << "model: " << args.str("checkpoint") << " (" << loaded.format << ", " << loaded.model->config().to_string()
             << "), device " << device << ", " << torch::get_num_threads() << " threads\n"
             << "depth planes: " << planes.why << "\n";
@@ -153,6 +159,17 @@ UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
 
     const umvs::DepthMap map = estimator.estimate(inputs, dmin, dmax);
     total_seconds += map.seconds;
+    if (!map.source_turns_deg.empty()) {
+      std::cerr << "\nview " << ref << ": sources turned by";
+      for (size_t s = 0; s < map.source_turns_deg.size(); ++s) {
+        const Eigen::Vector3d& turn = map.source_turns_deg[s];
+        char text[64];
+        std::snprintf(text, sizeof(text), "%s %d: (%.1f, %.1f, %.1f)", s ? "," : "", pair.sources[s], turn.x(),
+                      turn.y(), turn.z());
+        std::cerr << text;
+      }
+      std::cerr << " degrees about their x, y, z\n";
+    }
     umvs::write_pfm(written.depth_path(ref), map.depth);
     umvs::write_pfm(written.confidence_path(ref), map.confidence);
     umvs::write_png(written.depth_preview_path(ref), umvs::colorize(map.depth, dmin, dmax, map.confidence > 0.5));
