@@ -59,9 +59,7 @@ umvs::FusionConfig fusion_config_from_ros(const ros::NodeHandle& nh) {
 
 void InferenceNodeConfig::validate() const {
   umvs::parse_device(device);
-  if (estimator.num_depth != 0 && (estimator.num_depth < 8 || estimator.num_depth % 8 != 0)) {
-    throw std::invalid_argument("num_depth must be 0 (the checkpoint's) or a positive multiple of 8");
-  }
+  estimator.validate();
   // The network input is cropped to multiples of 32: a smaller bound leaves no image.
   for (const auto& [name, size] : {std::pair<const char*, int>{"max_width", estimator.max_width},
                                    std::pair<const char*, int>{"max_height", estimator.max_height}}) {
@@ -90,6 +88,7 @@ InferenceNodeConfig inference_node_config_from_ros(const ros::NodeHandle& nh) {
   std::string source_combination = umvs::to_string(c.estimator.source_combination);
   nh.param("source_combination", source_combination, source_combination);
   c.estimator.source_combination = umvs::source_combination_from_string(source_combination);
+  nh.param("source_rotation_search_deg", c.estimator.source_rotation_search_deg, c.estimator.source_rotation_search_deg);
   nh.param("rectified", c.rectified, c.rectified);
   nh.param("checkpoint", c.checkpoint, c.checkpoint);
   nh.param("max_image_pixels", c.max_image_pixels, c.max_image_pixels);
