@@ -260,6 +260,20 @@ TEST(InferArguments, ImpossibleDepthRangesAreRefusedAndTheUsedRangeIsSaid) {
   EXPECT_DOUBLE_EQ(read_cam_file(dir + "/ok/cams/00000000_cam.txt").depth_min, 0.5);
 }
 
+TEST(InferArguments, BadSourceOptionsAreRefusedByName) {
+  const std::string dir = test::temp_dir("source_options");
+  const std::string data = scene("source_options_data");
+  const std::string model = random_model(dir + "/model.pt");
+  const std::string common = "infer --data " + data + " --checkpoint " + model + " --threads 1 --ref 0 --out " + dir + "/bad";
+  for (const std::string bad : {" --source-rotation-search -1", " --source-rotation-search nan",
+                                " --source-combination bogus"}) {
+    Result r = run_umvs(common + bad);
+    EXPECT_EQ(r.status, 2) << bad << ": " << r.output;
+    EXPECT_TRUE(contains(r.output, bad.substr(1, bad.find(' ', 1) - 1)) || contains(r.output, "bogus")) << r.output;
+    EXPECT_FALSE(fs::exists(dir + "/bad")) << bad;
+  }
+}
+
 TEST(InferArguments, PlaneCountFollowsTheInputSizeNotTheCheckpoint) {
   EXPECT_EQ(default_plane_count(640), 128);   // MVSNet training
   EXPECT_EQ(default_plane_count(1600), 192);  // MVSNet on DTU

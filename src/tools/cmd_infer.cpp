@@ -89,6 +89,10 @@ UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
   cfg.max_width = args.integer("max-width");
   cfg.max_height = args.integer("max-height");
   cfg.source_rotation_search_deg = args.real("source-rotation-search");
+  if (!std::isfinite(cfg.source_rotation_search_deg) || cfg.source_rotation_search_deg < 0) {
+    throw std::invalid_argument("--source-rotation-search must be an angle >= 0 in degrees (0 = off), got " +
+                                args.str("source-rotation-search"));
+  }
 
   std::vector<int> refs = args.integers("ref");
   if (refs.empty()) {
