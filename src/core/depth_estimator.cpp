@@ -91,6 +91,7 @@ Eigen::Vector3d DepthEstimator::best_source_turn(const ViewInput& reference, con
   const int width = reference.camera.width, height = reference.camera.height;
   const NetworkResize full = plan_network_resize(width, height, config_.max_width, config_.max_height);
   const int search_width = std::max(full.width / 2, std::min(full.width, 320));
+  // The height bound follows the width's scale; + 31 so that rounding does not lose a 32-pixel row.
   const NetworkResize plan =
       plan_network_resize(width, height, search_width, full.height * search_width / std::max(1, full.width) + 31);
   const int planes = std::max(8, num_depth() / 2 / 8 * 8);
@@ -120,7 +121,9 @@ Eigen::Vector3d DepthEstimator::best_source_turn(const ViewInput& reference, con
   const RotationSearch search = search_rotation(similarity, config_.source_rotation_search_deg);
   // Keep the pose as given unless the turn is clearly better: on exact poses of rendered scenes
   // the best turn lowers the SSIM loss by up to ~3 % (noise of the half-size passes), while the
-  // living room's sources, a few tenths of a degree off, gain 9-95 % (docs/results.md).
+  // living room's sources, a few tenths of a degree off, gain 9-95 %. Not a guarantee: 3 of
+  // templeRing's 38 sources passed the margin with turns that cost their maps most of their fused
+  // points (docs/results.md).
   const double gain = (search.score - search.start_score) / std::max(std::abs(search.start_score), 1e-12);
   return gain >= kMinTurnGain ? search.degrees : Eigen::Vector3d::Zero();
 }

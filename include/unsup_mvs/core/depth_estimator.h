@@ -43,6 +43,8 @@ struct DepthEstimatorConfig {
   // which the pass of the reference and that source alone warps the source best onto the
   // reference (SSIM; search_rotation), on images of half the network's size with half the planes,
   // when that is clearly better than the pose as given. About 30 of those passes per source.
+  // Off by default: with exact poses it can still turn a source wrongly (templeRing, on a black
+  // background), and it corrects each source for one reference only, not the poses fusion uses.
   double source_rotation_search_deg = 0.0;
 
   void validate() const;  // throws std::invalid_argument naming the field
