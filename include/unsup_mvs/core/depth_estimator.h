@@ -91,8 +91,8 @@ class DepthEstimator {
   int num_depth() const;
 
  private:
-  // The rotation, in degrees, that makes the pass of the reference with the source alone most
-  // confident (images as loaded, not yet resized).
+  // The rotation, in degrees, with which the pass of the reference and the source alone warps the
+  // source best onto the reference, or zero when that is not clearly better (images as loaded).
   Eigen::Vector3d best_source_turn(const ViewInput& reference, const ViewInput& source, double depth_min,
                                    double depth_max);
 
