@@ -211,6 +211,30 @@ TEST(Losses, SsimAndSmoothnessBehave) {
   EXPECT_NEAR(smoothness_loss(depth * 1000, flat).item<double>(), s_flat, 1e-6);
 }
 
+// The rotation search judges a source's warp by SSIM only where the reference has texture: two
+// black windows match perfectly whatever the geometry, so they must be told apart from real matches.
+TEST(Losses, FlatWindowsMatchPerfectlyAndLocalStdFindsThem) {
+  torch::manual_seed(8);
+  auto ref = torch::zeros({1, 3, 12, 12});
+  ref.slice(3, 6, 12).copy_(torch::rand({1, 3, 12, 6}));  // left half black, right half textured
+  auto unrelated = torch::zeros({1, 3, 12, 12});
+  unrelated.slice(3, 6, 12).copy_(torch::rand({1, 3, 12, 6}));
+  auto valid = torch::ones({1, 1, 12, 12});
+  valid.slice(2, 0, 1).zero_();  // the top row unseen: its windows and the next row's are invalid
+  const SsimLossMap map = ssim_loss_map(ref, unrelated, valid);
+  EXPECT_EQ(map.window_valid.sum().item<double>(), 10 * 12);
+  EXPECT_NEAR(map.loss.slice(2, 2, 12).slice(3, 0, 4).abs().max().item<double>(), 0.0, 1e-6)
+      << "black against black should be a perfect match";
+  EXPECT_GT(map.loss.slice(2, 2, 12).slice(3, 8, 12).mean().item<double>(), 0.3)
+      << "random textures should not match";
+  const double mean = (map.loss * map.window_valid).sum().item<double>() / map.window_valid.sum().item<double>();
+  EXPECT_NEAR(ssim_loss(ref, unrelated, valid).item<double>(), mean, 1e-6);
+  // local_std: zero on the black half, about the std of uniform noise (0.29) on the textured one.
+  const auto spread = local_std(ref);
+  EXPECT_LT(spread.slice(3, 0, 5).max().item<double>(), 1e-3);
+  EXPECT_NEAR(spread.slice(3, 7, 12).mean().item<double>(), 0.27, 0.05);
+}
+
 TEST(Losses, PresetsAndValidation) {
   const auto p = LossConfig::paper();
   EXPECT_DOUBLE_EQ(p.alpha, 0.8);

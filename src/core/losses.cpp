@@ -113,7 +113,7 @@ torch::Tensor top_k_aggregate(const torch::Tensor& losses, const torch::Tensor& 
   return (values * kept_valid).sum() / kept_valid.sum().clamp_min(1.0);
 }
 
-torch::Tensor ssim_loss(const torch::Tensor& ref, const torch::Tensor& warped, const torch::Tensor& valid) {
+SsimLossMap ssim_loss_map(const torch::Tensor& ref, const torch::Tensor& warped, const torch::Tensor& valid) {
   const double c1 = 0.01 * 0.01, c2 = 0.03 * 0.03;
   auto x = ref * valid, y = warped * valid;
   auto mu_x = avg3(x), mu_y = avg3(y);
@@ -122,10 +122,20 @@ torch::Tensor ssim_loss(const torch::Tensor& ref, const torch::Tensor& warped, c
   auto sigma_xy = avg3(x * y) - mu_x * mu_y;
   auto ssim = ((2 * mu_x * mu_y + c1) * (2 * sigma_xy + c2)) /
               ((mu_x * mu_x + mu_y * mu_y + c1) * (sigma_x + sigma_y + c2));
-  auto map = ((1 - ssim) / 2).clamp(0, 1).mean(1, /*keepdim=*/true);  // [B,1,H,W]
-  // Only windows whose 3x3 pixels are all valid.
-  auto mask = (avg3(valid) > 0.999).to(map.scalar_type());
-  return (map * mask).sum() / mask.sum().clamp_min(1.0);
+  SsimLossMap map;
+  map.loss = ((1 - ssim) / 2).clamp(0, 1).mean(1, /*keepdim=*/true);
+  map.window_valid = (avg3(valid) > 0.999).to(map.loss.scalar_type());
+  return map;
+}
+
+torch::Tensor ssim_loss(const torch::Tensor& ref, const torch::Tensor& warped, const torch::Tensor& valid) {
+  const SsimLossMap map = ssim_loss_map(ref, warped, valid);
+  return (map.loss * map.window_valid).sum() / map.window_valid.sum().clamp_min(1.0);
+}
+
+torch::Tensor local_std(const torch::Tensor& image) {
+  const auto mu = avg3(image);
+  return (avg3(image * image) - mu * mu).clamp_min(0).sqrt().mean(1, /*keepdim=*/true);
 }
 
 torch::Tensor supervised_depth_loss(const torch::Tensor& depth, const torch::Tensor& gt,

@@ -75,8 +75,19 @@ LossMap photometric_loss_map(const torch::Tensor& ref, const torch::Tensor& warp
 torch::Tensor top_k_aggregate(const torch::Tensor& losses, const torch::Tensor& valid, int top_k,
                               double invalid_value = 1e4);
 
-// Mean of the masked (1 - SSIM)/2 map.  ref, warped [B,C,H,W]; valid [B,1,H,W]  -> scalar
+// Per-pixel (1 - SSIM)/2 of 3x3 windows, averaged over channels, and the windows whose nine pixels
+// are all valid.  ref, warped [B,C,H,W]; valid [B,1,H,W]  -> both [B,1,H,W]
+struct SsimLossMap {
+  torch::Tensor loss;
+  torch::Tensor window_valid;  // float 0/1
+};
+SsimLossMap ssim_loss_map(const torch::Tensor& ref, const torch::Tensor& warped, const torch::Tensor& valid);
+
+// Mean of ssim_loss_map over its valid windows.  -> scalar
 torch::Tensor ssim_loss(const torch::Tensor& ref, const torch::Tensor& warped, const torch::Tensor& valid);
+
+// Standard deviation of each 3x3 window, averaged over channels.  image [B,C,H,W] -> [B,1,H,W]
+torch::Tensor local_std(const torch::Tensor& image);
 
 // Edge-aware smoothness of depth [B,H,W] given the reference image [B,C,H,W]  -> scalar.
 // Depth is divided by its per-image mean first, so the weight does not depend on scene units.
