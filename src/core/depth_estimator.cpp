@@ -38,6 +38,8 @@ MvsNet moved_to(MvsNet model, const torch::Device& device) {
 
 constexpr double kRadiansPerDegree = M_PI / 180.0;
 constexpr double kMinTurnGain = 0.05;  // relative drop of the SSIM loss a source turn must bring
+// A 3x3 window whose intensities spread less than one grey level tells the turn search nothing.
+constexpr double kMinTextureStd = 1.0 / 255;
 }  // namespace
 
 RotationSearch search_rotation(const std::function<double(const Eigen::Vector3d& degrees)>& score, double limit_deg) {
@@ -83,18 +85,10 @@ DepthEstimator::DepthEstimator(MvsNet model, torch::Device device, DepthEstimato
   config_.validate();
 }
 
-Eigen::Vector3d DepthEstimator::best_source_turn(const ViewInput& reference, const ViewInput& source,
-                                                 double depth_min, double depth_max) {
-  // Half the network's input size (but no less than 320 wide, or the input's width) and half its
-  // planes: a quarter of the work per pass, and a tenth of a degree is still 0.4 px at 320 wide
-  // with a 60-degree field of view.
-  const int width = reference.camera.width, height = reference.camera.height;
-  const NetworkResize full = plan_network_resize(width, height, config_.max_width, config_.max_height);
-  const int search_width = std::max(full.width / 2, std::min(full.width, 320));
-  // The height bound follows the width's scale; + 31 so that rounding does not lose a 32-pixel row.
-  const NetworkResize plan =
-      plan_network_resize(width, height, search_width, full.height * search_width / std::max(1, full.width) + 31);
-  const int planes = std::max(8, num_depth() / 2 / 8 * 8);
+std::function<double(const Eigen::Vector3d&)> DepthEstimator::source_warp_loss(const ViewInput& reference,
+                                                                               const ViewInput& source,
+                                                                               const NetworkResize& plan, int planes,
+                                                                               double depth_min, double depth_max) {
   const Camera ref_camera = apply_network_resize(reference.camera, plan);
   const Camera source_camera = apply_network_resize(source.camera, plan);
   torch::NoGradGuard no_grad;
@@ -105,27 +99,66 @@ Eigen::Vector3d DepthEstimator::best_source_turn(const ViewInput& reference, con
       depth_hypotheses(depth_min, depth_max, planes, network_.model()->config().depth_sampling).unsqueeze(0).to(device_);
   const auto K_ref = intrinsics_tensor(ref_camera).unsqueeze(0).to(device_);
   const auto K_source = intrinsics_tensor(source_camera).unsqueeze(0).to(device_);
-  // The score is how well the source, warped by the pass's own depth, matches the reference
-  // (SSIM, robust to exposure), not the pass's confidence: a turn along the epipolar lines only
-  // moves the depth, which keeps the warp as good, while confidence rises when depth moves away
-  // from the ends of the range, and would pull exact poses off.
-  const auto similarity = [&](const Eigen::Vector3d& degrees) {
+  // How well the source, warped by the pass's own depth, matches the reference (SSIM, robust to
+  // exposure), not the pass's confidence: a turn along the epipolar lines only moves the depth,
+  // which keeps the warp as good, while confidence rises when depth moves away from the ends of the
+  // range, and would pull exact poses off.
+  const auto warp_loss_map = [=](const Eigen::Vector3d& degrees) {
+    torch::NoGradGuard no_grad;
     const Camera turned = source_camera.turned(degrees * kRadiansPerDegree);
     const auto proj = mvsnet_projection_matrices({ref_camera, turned}).unsqueeze(0).to(device_);
     const auto depth = network_.forward(batch, proj, depth_values, false).depth;  // [1,h/4,w/4]
     const auto full_depth = depth.repeat_interleave(4, 1).repeat_interleave(4, 2);
     const auto T = relative_pose_tensor(ref_camera, turned).unsqueeze(0).to(device_);
     const InverseWarp warp = inverse_warp(source_image, K_ref, K_source, T, full_depth);
-    return -ssim_loss(ref_image, warp.warped, warp.valid).item<double>();
+    return ssim_loss_map(ref_image, warp.warped, warp.valid);
   };
-  const RotationSearch search = search_rotation(similarity, config_.source_rotation_search_deg);
-  // Keep the pose as given unless the turn is clearly better: on exact poses of rendered scenes
-  // the best turn lowers the SSIM loss by up to ~3 % (noise of the half-size passes), while the
-  // living room's sources, a few tenths of a degree off, gain 9-95 %. Not a guarantee: 3 of
-  // templeRing's 38 sources passed the margin with turns that cost their maps most of their fused
-  // points (docs/results.md).
-  const double gain = (search.score - search.start_score) / std::max(std::abs(search.start_score), 1e-12);
-  return gain >= kMinTurnGain ? search.degrees : Eigen::Vector3d::Zero();
+  // Only windows with texture in the reference, and that the source sees at the pose as given, are
+  // judged. A flat window's SSIM is perfect whatever the depth and the pose (templeRing's black
+  // background), so averaging over them let a turn win by trading textured windows out of view.
+  const SsimLossMap at_pose = warp_loss_map(Eigen::Vector3d::Zero());
+  const auto judged = at_pose.window_valid * (local_std(ref_image) > kMinTextureStd).to(at_pose.loss.scalar_type());
+  const auto mean_judged_loss = [judged](const SsimLossMap& map) {
+    const auto weight = judged * map.window_valid;
+    return (map.loss * weight).sum().item<double>() / std::max(weight.sum().item<double>(), 1.0);
+  };
+  const double loss_at_pose = mean_judged_loss(at_pose);
+  return [=](const Eigen::Vector3d& degrees) {
+    return degrees.isZero() ? loss_at_pose : mean_judged_loss(warp_loss_map(degrees));
+  };
+}
+
+SourceTurn DepthEstimator::best_source_turn(const ViewInput& reference, const ViewInput& source,
+                                            double depth_min, double depth_max) {
+  // The search runs at half the network's input size (but no less than 320 wide, or the input's
+  // width) and with half its planes: a quarter of the work per pass, and a tenth of a degree is
+  // still 0.4 px at 320 wide with a 60-degree field of view.
+  const int width = reference.camera.width, height = reference.camera.height;
+  const NetworkResize full = plan_network_resize(width, height, config_.max_width, config_.max_height);
+  const int search_width = std::max(full.width / 2, std::min(full.width, 320));
+  // The height bound follows the width's scale; + 31 so that rounding does not lose a 32-pixel row.
+  const NetworkResize half =
+      plan_network_resize(width, height, search_width, full.height * search_width / std::max(1, full.width) + 31);
+  const auto half_size_loss = source_warp_loss(reference, source, half, std::max(8, num_depth() / 2 / 8 * 8),
+                                               depth_min, depth_max);
+  const RotationSearch search =
+      search_rotation([&](const Eigen::Vector3d& d) { return -half_size_loss(d); }, config_.source_rotation_search_deg);
+  const auto gain = [](double loss_at_pose, double loss_turned) {
+    return (loss_at_pose - loss_turned) / std::max(loss_at_pose, 1e-12);
+  };
+  SourceTurn turn;
+  turn.degrees = search.degrees;
+  turn.search_gain = gain(-search.start_score, -search.score);
+  // Keep the pose as given unless the turn is clearly better, in the search and again at the
+  // network's full size and planes: on exact poses the half-size passes let noise turns gain up to
+  // ~5 % (rendered scenes, templeRing), while the living room's sources, a few tenths of a degree
+  // off, gain 8-75 % (docs/results.md).
+  if (turn.search_gain >= kMinTurnGain) {
+    const auto full_size_loss = source_warp_loss(reference, source, full, num_depth(), depth_min, depth_max);
+    turn.full_size_gain = gain(full_size_loss(Eigen::Vector3d::Zero()), full_size_loss(search.degrees));
+  }
+  turn.kept = turn.search_gain >= kMinTurnGain && turn.full_size_gain >= kMinTurnGain;
+  return turn;
 }
 
 int DepthEstimator::num_depth() const {
@@ -162,9 +195,9 @@ DepthMap DepthEstimator::estimate(const std::vector<ViewInput>& views, double de
   DepthMap map;
   if (config_.source_rotation_search_deg > 0) {
     for (size_t s = 1; s < views.size(); ++s) {
-      const Eigen::Vector3d turn = best_source_turn(ref, views[s], depth_min, depth_max);
-      cameras[s] = cameras[s].turned(turn * kRadiansPerDegree);
-      map.source_turns_deg.push_back(turn);
+      const SourceTurn turn = best_source_turn(ref, views[s], depth_min, depth_max);
+      if (turn.kept) cameras[s] = cameras[s].turned(turn.degrees * kRadiansPerDegree);
+      map.source_turns.push_back(turn);
     }
   }
   MvsOutput out;

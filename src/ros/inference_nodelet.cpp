@@ -253,6 +253,13 @@ class InferenceNodelet : public nodelet::Nodelet {
                           "image; %ld done, %ld stale sets dropped, %ld failed",
                           set.reference_id, map.camera.width, map.camera.height, total, map.seconds, latency, processed_,
                           static_cast<long>(pending_->dropped()), failed_.load());
+    for (size_t s = 0; s < map.source_turns.size(); ++s) {
+      const umvs::SourceTurn& turn = map.source_turns[s];
+      if (!turn.kept) continue;
+      NODELET_DEBUG("inference: keyframe %u: source %zu turned by (%.1f, %.1f, %.1f) deg (warp %.0f %% better)",
+                    set.reference_id, s + 1, turn.degrees.x(), turn.degrees.y(), turn.degrees.z(),
+                    100.0 * turn.full_size_gain);
+    }
     publishDiagnostics(total, map.seconds, latency, served);
   }
 

@@ -163,16 +163,21 @@ UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
 
     const umvs::DepthMap map = estimator.estimate(inputs, dmin, dmax);
     total_seconds += map.seconds;
-    if (!map.source_turns_deg.empty()) {
-      std::cerr << "\nview " << ref << ": sources turned by";
-      for (size_t s = 0; s < map.source_turns_deg.size(); ++s) {
-        const Eigen::Vector3d& turn = map.source_turns_deg[s];
-        char text[64];
-        std::snprintf(text, sizeof(text), "%s %d: (%.1f, %.1f, %.1f)", s ? "," : "", pair.sources[s], turn.x(),
-                      turn.y(), turn.z());
+    if (!map.source_turns.empty()) {
+      std::cerr << "\nview " << ref << ", rotation search (turns kept when the warp is 5 % better, also at full size):";
+      for (size_t s = 0; s < map.source_turns.size(); ++s) {
+        const umvs::SourceTurn& turn = map.source_turns[s];
+        char text[160];
+        std::snprintf(text, sizeof(text), "\n  source %d: %s (%.1f, %.1f, %.1f) degrees about x, y, z; warp %.1f %% better",
+                      pair.sources[s], turn.kept ? "turned by" : "not turned; best turn", turn.degrees.x(), turn.degrees.y(),
+                      turn.degrees.z(), 100.0 * turn.search_gain);
         std::cerr << text;
+        if (turn.full_size_gain != 0.0) {
+          std::snprintf(text, sizeof(text), ", at full size %.1f %%", 100.0 * turn.full_size_gain);
+          std::cerr << text;
+        }
       }
-      std::cerr << " degrees about their x, y, z\n";
+      std::cerr << "\n";
     }
     umvs::write_pfm(written.depth_path(ref), map.depth);
     umvs::write_pfm(written.confidence_path(ref), map.confidence);

@@ -41,10 +41,11 @@ struct DepthEstimatorConfig {
   // pixels at 640 wide, and the cost volume then compares pixels that do not correspond. Before
   // the final pass each source camera is turned about its own centre by the small rotation with
   // which the pass of the reference and that source alone warps the source best onto the
-  // reference (SSIM; search_rotation), on images of half the network's size with half the planes,
-  // when that is clearly better than the pose as given. About 30 of those passes per source.
-  // Off by default: with exact poses it can still turn a source wrongly (templeRing, on a black
-  // background), and it corrects each source for one reference only, not the poses fusion uses.
+  // reference (SSIM over the reference's textured windows; search_rotation), on images of half the
+  // network's size with half the planes, when that is clearly better than the pose as given there
+  // and again at full size. About 30 of those passes per source. Off by default: it costs 6-14
+  // times the time of a map, and it corrects each source for one reference only, not the poses
+  // fusion uses.
   double source_rotation_search_deg = 0.0;
 
   void validate() const;  // throws std::invalid_argument naming the field
@@ -61,6 +62,14 @@ struct RotationSearch {
 };
 RotationSearch search_rotation(const std::function<double(const Eigen::Vector3d& degrees)>& score, double limit_deg);
 
+// A source view's turn by the rotation search (DepthEstimatorConfig::source_rotation_search_deg).
+struct SourceTurn {
+  Eigen::Vector3d degrees = Eigen::Vector3d::Zero();  // the best turn found, about the source's x, y, z
+  double search_gain = 0.0;  // how much the best turn found lowered the warp's SSIM loss (fraction)
+  double full_size_gain = 0.0;  // the same at the network's full size (0 when the search gain was too small)
+  bool kept = false;  // whether the source was turned: both gains at least 5 %
+};
+
 struct DepthMap {
   torch::Tensor depth;       // [h,w] float32 metres, CPU (h, w = network input / 4)
   torch::Tensor confidence;  // [h,w] float32 in [0,1], CPU
@@ -70,9 +79,8 @@ struct DepthMap {
   double depth_min = 0.0, depth_max = 0.0;
   double seconds = 0.0;      // network time, including transfers (all passes)
   MvsStageTimes stages;      // where the first pass's network time went (CPU fast path only)
-  // Per source view: the rotation (degrees about its x, y, z) the sources were turned by
-  // (DepthEstimatorConfig::source_rotation_search_deg; empty when off).
-  std::vector<Eigen::Vector3d> source_turns_deg;
+  // Per source view, what DepthEstimatorConfig::source_rotation_search_deg did (empty when off).
+  std::vector<SourceTurn> source_turns;
 };
 
 class DepthEstimator {
@@ -91,10 +99,15 @@ class DepthEstimator {
   int num_depth() const;
 
  private:
-  // The rotation, in degrees, with which the pass of the reference and the source alone warps the
-  // source best onto the reference, or zero when that is not clearly better (images as loaded).
-  Eigen::Vector3d best_source_turn(const ViewInput& reference, const ViewInput& source, double depth_min,
-                                   double depth_max);
+  // The rotation with which the pass of the reference and the source alone warps the source best
+  // onto the reference (images as loaded); kept when clearly better.
+  SourceTurn best_source_turn(const ViewInput& reference, const ViewInput& source, double depth_min,
+                              double depth_max);
+  // The SSIM loss, over the reference's textured windows, of the source warped by the pair pass's
+  // depth after the source is turned by the given rotation (degrees), at the given size and planes.
+  std::function<double(const Eigen::Vector3d&)> source_warp_loss(const ViewInput& reference, const ViewInput& source,
+                                                                 const NetworkResize& plan, int planes,
+                                                                 double depth_min, double depth_max);
 
   torch::Device device_;
   FastMvsNet network_;
