@@ -150,9 +150,9 @@ SourceTurn DepthEstimator::best_source_turn(const ViewInput& reference, const Vi
   turn.degrees = search.degrees;
   turn.search_gain = gain(-search.start_score, -search.score);
   // Keep the pose as given unless the turn is clearly better, in the search and again at the
-  // network's full size and planes: on exact poses the half-size passes let noise turns gain up to
-  // ~5 % (rendered scenes, templeRing), while the living room's sources, a few tenths of a degree
-  // off, gain 8-75 % (docs/results.md).
+  // network's full size and planes: on exact poses, noise turns gained up to 6 % in the half-size
+  // search but at most 2.4 % at full size (rendered scenes, templeRing), while the living room's
+  // sources, a few tenths of a degree off, gain 7-74 % and 7-46 % (docs/results.md).
   if (turn.search_gain >= kMinTurnGain) {
     const auto full_size_loss = source_warp_loss(reference, source, full, num_depth(), depth_min, depth_max);
     turn.full_size_gain = gain(full_size_loss(Eigen::Vector3d::Zero()), full_size_loss(search.degrees));
