@@ -554,10 +554,11 @@ PairInput pair_input(const MvsFolder& folder, int ref, int sources, int num_dept
   return input;
 }
 
-DepthEstimator searching_estimator(double limit_deg) {
+// The default model at 128 planes, searching source rotations within +-search_deg (0 = off).
+DepthEstimator estimator_at_128_planes(double search_deg) {
   DepthEstimatorConfig config;
   config.num_depth = 128;
-  config.source_rotation_search_deg = limit_deg;
+  config.source_rotation_search_deg = search_deg;
   return DepthEstimator(load_model(default_model(), torch::kCPU).model, torch::kCPU, config);
 }
 
@@ -572,7 +573,7 @@ TEST(DefaultModel, SourceRotationSearchKeepsTempleRingsExactPoses) {
   import.out_dir = test::temp_dir("rotation_search_temple");
   import_middlebury(import);
   const MvsFolder folder(import.out_dir);
-  DepthEstimator searching = searching_estimator(2.0);
+  DepthEstimator searching = estimator_at_128_planes(2.0);
   for (const int ref : {18, 21, 22, 29}) {
     const PairInput input = pair_input(folder, ref, 2, 128);
     const DepthMap map = searching.estimate(input.views, input.depth_min, input.depth_max);
@@ -597,8 +598,8 @@ TEST(DefaultModel, SourceRotationSearchCorrectsTheLivingRoomsPoses) {
   const PairInput input = pair_input(folder, 1, 2, 128);
   ASSERT_EQ(folder.pair_of(1).sources.at(0), 3);
   const auto gt = read_pfm(folder.depth_gt_path(1));
-  DepthEstimator plain = searching_estimator(0.0);
-  DepthEstimator searching = searching_estimator(2.0);
+  DepthEstimator plain = estimator_at_128_planes(0.0);
+  DepthEstimator searching = estimator_at_128_planes(2.0);
   const double as_given = abs_rel_on_depth_grid(plain.estimate(input.views, input.depth_min, input.depth_max).depth, gt);
   const DepthMap corrected = searching.estimate(input.views, input.depth_min, input.depth_max);
   const double after = abs_rel_on_depth_grid(corrected.depth, gt);

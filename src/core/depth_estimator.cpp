@@ -37,7 +37,6 @@ MvsNet moved_to(MvsNet model, const torch::Device& device) {
 }
 
 constexpr double kRadiansPerDegree = M_PI / 180.0;
-constexpr double kMinTurnGain = 0.05;  // relative drop of the SSIM loss a source turn must bring
 // A 3x3 window whose intensities spread less than one grey level tells the turn search nothing.
 constexpr double kMinTextureStd = 1.0 / 255;
 }  // namespace
@@ -153,11 +152,11 @@ SourceTurn DepthEstimator::best_source_turn(const ViewInput& reference, const Vi
   // network's full size and planes: on exact poses, noise turns gained up to 6 % in the half-size
   // search but at most 2.4 % at full size (rendered scenes, templeRing), while the living room's
   // sources, a few tenths of a degree off, gain 7-74 % and 7-46 % (docs/results.md).
-  if (turn.search_gain >= kMinTurnGain) {
+  if (turn.search_gain >= kMinSourceTurnGain) {
     const auto full_size_loss = source_warp_loss(reference, source, full, num_depth(), depth_min, depth_max);
     turn.full_size_gain = gain(full_size_loss(Eigen::Vector3d::Zero()), full_size_loss(search.degrees));
   }
-  turn.kept = turn.search_gain >= kMinTurnGain && turn.full_size_gain >= kMinTurnGain;
+  turn.kept = turn.search_gain >= kMinSourceTurnGain && turn.full_size_gain >= kMinSourceTurnGain;
   return turn;
 }
 

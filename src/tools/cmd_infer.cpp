@@ -164,7 +164,8 @@ UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
     const umvs::DepthMap map = estimator.estimate(inputs, dmin, dmax);
     total_seconds += map.seconds;
     if (!map.source_turns.empty()) {
-      std::cerr << "\nview " << ref << ", rotation search (turns kept when the warp is 5 % better, also at full size):";
+      std::cerr << "\nview " << ref << ", rotation search (turns kept when the warp is "
+                << 100.0 * umvs::kMinSourceTurnGain << " % better, also at full size):";
       for (size_t s = 0; s < map.source_turns.size(); ++s) {
         const umvs::SourceTurn& turn = map.source_turns[s];
         char text[160];

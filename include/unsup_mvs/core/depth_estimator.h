@@ -62,12 +62,15 @@ struct RotationSearch {
 };
 RotationSearch search_rotation(const std::function<double(const Eigen::Vector3d& degrees)>& score, double limit_deg);
 
+// The relative drop of a source's warp loss a turn must bring, in the search and at full size.
+constexpr double kMinSourceTurnGain = 0.05;
+
 // A source view's turn by the rotation search (DepthEstimatorConfig::source_rotation_search_deg).
 struct SourceTurn {
   Eigen::Vector3d degrees = Eigen::Vector3d::Zero();  // the best turn found, about the source's x, y, z
   double search_gain = 0.0;  // how much the best turn found lowered the warp's SSIM loss (fraction)
   double full_size_gain = 0.0;  // the same at the network's full size (0 when the search gain was too small)
-  bool kept = false;  // whether the source was turned: both gains at least 5 %
+  bool kept = false;  // whether the source was turned: both gains at least kMinSourceTurnGain
 };
 
 struct DepthMap {
