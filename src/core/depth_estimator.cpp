@@ -128,7 +128,10 @@ std::function<double(const Eigen::Vector3d&)> DepthEstimator::source_warp_loss(c
 }
 
 SourceTurn DepthEstimator::best_source_turn(const ViewInput& reference, const ViewInput& source,
-                                            double depth_min, double depth_max) {
+                                            double depth_min, double depth_max, double limit_deg) {
+  if (!std::isfinite(limit_deg) || limit_deg <= 0) {
+    throw std::invalid_argument("the rotation search needs a limit > 0 degrees, got " + std::to_string(limit_deg));
+  }
   // The search runs at half the network's input size (but no less than 320 wide, or the input's
   // width) and with half its planes: a quarter of the work per pass, and a tenth of a degree is
   // still 0.4 px at 320 wide with a 60-degree field of view.
@@ -141,7 +144,7 @@ SourceTurn DepthEstimator::best_source_turn(const ViewInput& reference, const Vi
   const auto half_size_loss = source_warp_loss(reference, source, half, std::max(8, num_depth() / 2 / 8 * 8),
                                                depth_min, depth_max);
   const RotationSearch search =
-      search_rotation([&](const Eigen::Vector3d& d) { return -half_size_loss(d); }, config_.source_rotation_search_deg);
+      search_rotation([&](const Eigen::Vector3d& d) { return -half_size_loss(d); }, limit_deg);
   const auto gain = [](double loss_at_pose, double loss_turned) {
     return (loss_at_pose - loss_turned) / std::max(loss_at_pose, 1e-12);
   };
@@ -194,7 +197,7 @@ DepthMap DepthEstimator::estimate(const std::vector<ViewInput>& views, double de
   DepthMap map;
   if (config_.source_rotation_search_deg > 0) {
     for (size_t s = 1; s < views.size(); ++s) {
-      const SourceTurn turn = best_source_turn(ref, views[s], depth_min, depth_max);
+      const SourceTurn turn = best_source_turn(ref, views[s], depth_min, depth_max, config_.source_rotation_search_deg);
       if (turn.kept) cameras[s] = cameras[s].turned(turn.degrees * kRadiansPerDegree);
       map.source_turns.push_back(turn);
     }

@@ -101,11 +101,14 @@ class DepthEstimator {
   const DepthEstimatorConfig& config() const { return config_; }
   int num_depth() const;
 
+  // The rotation, within +-limit_deg about each axis, with which the pass of the reference and the
+  // source alone warps the source best onto the reference (images as loaded); kept when clearly
+  // better (SourceTurn::kept). What source_rotation_search_deg runs per source, and what
+  // `umvs refine-poses` measures per pair (core/pose_refinement.h).
+  SourceTurn best_source_turn(const ViewInput& reference, const ViewInput& source, double depth_min, double depth_max,
+                              double limit_deg);
+
  private:
-  // The rotation with which the pass of the reference and the source alone warps the source best
-  // onto the reference (images as loaded); kept when clearly better.
-  SourceTurn best_source_turn(const ViewInput& reference, const ViewInput& source, double depth_min,
-                              double depth_max);
   // The SSIM loss, over the reference's textured windows, of the source warped by the pair pass's
   // depth after the source is turned by the given rotation (degrees), at the given size and planes.
   std::function<double(const Eigen::Vector3d&)> source_warp_loss(const ViewInput& reference, const ViewInput& source,
