@@ -99,11 +99,13 @@ DepthMetrics combine_depth_metrics(const std::vector<DepthMetrics>& parts) {
   return out;
 }
 
-torch::Tensor sample_depth_at_camera(const torch::Tensor& gt_in, const Camera& gt_cam, const Camera& est_cam) {
+torch::Tensor sample_depth_at_camera(const torch::Tensor& gt_in, const Camera& gt_cam, const Camera& est_cam,
+                                     double max_turn_deg) {
   if (gt_in.dim() != 2) throw std::invalid_argument("sample_depth_at_camera: ground truth must be [H,W]");
   const double rot = rotation_angle(gt_cam.R(), est_cam.R());
+  const double max_rot = std::max(1e-5, max_turn_deg * M_PI / 180.0);
   const double scale = std::max(1.0, gt_cam.center().norm());
-  if (rot > 1e-5 || (gt_cam.center() - est_cam.center()).norm() > 1e-6 * scale) {
+  if (rot > max_rot || (gt_cam.center() - est_cam.center()).norm() > 1e-6 * scale) {
     throw std::invalid_argument("the estimate's camera and the ground truth's camera have different poses (rotation " +
                                 std::to_string(rot * 180.0 / M_PI) + " deg, centres " +
                                 std::to_string((gt_cam.center() - est_cam.center()).norm()) + " apart)");
@@ -112,8 +114,11 @@ torch::Tensor sample_depth_at_camera(const torch::Tensor& gt_in, const Camera& g
   const int H = static_cast<int>(gt.size(0)), W = static_cast<int>(gt.size(1));
   const int h = est_cam.height, w = est_cam.width;
   if (h <= 0 || w <= 0) throw std::invalid_argument("sample_depth_at_camera: the estimate's camera has no image size");
-  // Same pose: pixels map by the homography K_gt R_gt R_est^T K_est^-1 (R equal up to 1e-5).
-  const Eigen::Matrix3d Hm = gt_cam.K * gt_cam.R() * est_cam.R().transpose() * est_cam.K.inverse();
+  // Same pose: pixels map by the homography K_gt R_gt R_est^T K_est^-1 (R equal up to 1e-5). A
+  // turned estimate (a refined pose) has the same image, so its pixels map by K_gt K_est^-1.
+  const Eigen::Matrix3d rotation =
+      rot > 1e-5 ? Eigen::Matrix3d::Identity() : Eigen::Matrix3d(gt_cam.R() * est_cam.R().transpose());
+  const Eigen::Matrix3d Hm = gt_cam.K * rotation * est_cam.K.inverse();
   auto out = torch::zeros({h, w}, torch::kFloat32);
   const auto g = gt.accessor<float, 2>();
   auto o = out.accessor<float, 2>();

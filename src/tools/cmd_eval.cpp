@@ -98,6 +98,9 @@ int eval_depth(int argc, char** argv) {
       .option("covisibility-sources", "0",
               "split the errors by whether the first N neighbours in GT/pair.txt see the pixel (2 = umvs infer's "
               "default --views 3); 0 = off")
+      .option("max-turn-deg", "0",
+              "accept estimates whose cameras are turned by up to this many degrees from GT's, as after "
+              "`umvs refine-poses`: the images are the same, so depth is compared pixel for pixel (0 = same pose only)")
       .flag("json", "print JSON instead of a table");
   if (!args.parse(argc, argv)) return 0;
   umvs::configure_threads(0);
@@ -108,6 +111,10 @@ int eval_depth(int argc, char** argv) {
   const std::string est_dir = find_depth_dir(est_root, args.str("est-subdir"));
   const double min_conf = args.real("min-confidence");
   const int covisibility_sources = args.integer("covisibility-sources");
+  const double max_turn_deg = args.real("max-turn-deg");
+  if (!std::isfinite(max_turn_deg) || max_turn_deg < 0) {
+    throw std::invalid_argument("--max-turn-deg must be an angle >= 0 in degrees, got " + args.str("max-turn-deg"));
+  }
   if (covisibility_sources < 0) throw std::invalid_argument("--covisibility-sources must be >= 0");
   std::vector<umvs::ViewPair> pairs;
   if (covisibility_sources > 0) {
@@ -160,8 +167,9 @@ int eval_depth(int argc, char** argv) {
       ce.width = static_cast<int>(est.size(1));
       ce.height = static_cast<int>(est.size(0));
       gt_camera_at_estimate = ce;
+      gt_camera_at_estimate.T_cam_world = cg.T_cam_world;  // the same unless --max-turn-deg allows a refined pose
       try {
-        gt = umvs::sample_depth_at_camera(gt, cg, ce);
+        gt = umvs::sample_depth_at_camera(gt, cg, ce, max_turn_deg);
       } catch (const std::invalid_argument& e) {
         throw std::invalid_argument("view " + std::to_string(id) + ": " + e.what() + " (" + est_cam + " vs " + gt_cam + ")");
       }

@@ -54,7 +54,11 @@ DepthMetrics combine_depth_metrics(const std::vector<DepthMetrics>& parts);
 // K_gt K_est^-1 (u,v,1) -- for `umvs infer` output without resizing that is exactly (4u, 4v).
 // gt: [H,W] -> [h,w] (0 where the pixel falls outside the ground truth). Throws
 // std::invalid_argument when the two cameras' poses differ (rotation or centre).
-torch::Tensor sample_depth_at_camera(const torch::Tensor& gt, const Camera& gt_camera, const Camera& est_camera);
+// `max_turn_deg` > 0 accepts an estimate whose camera is turned about the same centre by up to that
+// angle: one whose pose `umvs refine-poses` corrected. Its image is the same, so pixels then map by
+// K_gt K_est^-1 alone.
+torch::Tensor sample_depth_at_camera(const torch::Tensor& gt, const Camera& gt_camera, const Camera& est_camera,
+                                     double max_turn_deg = 0.0);
 
 // Which pixels of a reference view some source view also sees, decided on ground truth alone:
 // the pixel's ground-truth point passes fusion's round trip (check_consistency at 1 px and
