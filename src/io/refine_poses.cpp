@@ -34,7 +34,8 @@ void check_output_folder(const std::string& data_dir, const std::string& out_dir
 std::string report_text(const PoseRefinementResult& result) {
   std::string text = "# umvs refine-poses: per view, the turn applied (degrees about the camera's own x, y, z)\n";
   char line[200];
-  for (const auto& [id, d] : result.view_degrees) {
+  for (const auto& [id, turn] : result.view_degrees) {
+    const Eigen::Vector3d d = turn.unaryExpr([](double v) { return std::abs(v) < 5e-4 ? 0.0 : v; });  // no "-0.000"
     std::snprintf(line, sizeof(line), "view %d turn %.3f %.3f %.3f\n", id, d.x(), d.y(), d.z());
     text += line;
   }

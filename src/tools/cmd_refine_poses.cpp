@@ -2,7 +2,9 @@
 // without labels (io/refine_poses.h).
 #include <torch/torch.h>
 
+#include <cmath>
 #include <cstdio>
+#include <memory>
 #include <iostream>
 
 #include "unsup_mvs/core/depth_estimator.h"
@@ -88,7 +90,8 @@ int refine_poses(int argc, char** argv) {
     std::cout << "round " << round << ": " << measured << " pairs measured, " << kept << " turns kept (warp "
               << 100.0 * umvs::kMinSourceTurnGain << " % better, also at full size)\n";
   }
-  for (const auto& [id, d] : result.view_degrees) {
+  for (const auto& [id, turn] : result.view_degrees) {
+    const Eigen::Vector3d d = turn.unaryExpr([](double v) { return std::abs(v) < 5e-3 ? 0.0 : v; });  // no "-0.00"
     char line[120];
     std::snprintf(line, sizeof(line), "  view %d: turned by (%.2f, %.2f, %.2f) degrees about x, y, z\n", id, d.x(), d.y(), d.z());
     std::cout << line;
