@@ -125,5 +125,30 @@ TEST(Covisibility, SourcesOutOfViewAndOccludersHideReferencePixels) {
   EXPECT_FALSE(covisible_by_ground_truth(torch::zeros_like(wall), camera_at(0.0), {right}).any().item<bool>());
 }
 
+// A ground-truth depth map with a distinct value per pixel, and an estimate at a quarter of its
+// size: same pose, or turned by 0.5 degrees as after `umvs refine-poses` (same image).
+TEST(SampleDepthAtCamera, ATurnedEstimateIsComparedPixelForPixelOnlyWhenAllowed) {
+  Camera gt_camera;
+  gt_camera.K << 64, 0, 31.5, 0, 64, 23.5, 0, 0, 1;
+  gt_camera.T_cam_world.topRightCorner<3, 1>() = Eigen::Vector3d(0.1, -0.2, 0.3);
+  gt_camera.width = 64;
+  gt_camera.height = 48;
+  const auto gt = torch::arange(1, 64 * 48 + 1, torch::kFloat32).view({48, 64});
+  Camera estimate = gt_camera;
+  estimate.K.topRows<2>() *= 0.25;
+  estimate.width = 16;
+  estimate.height = 12;
+  const auto same_pose = sample_depth_at_camera(gt, gt_camera, estimate);
+  EXPECT_TRUE(same_pose.equal(gt.slice(0, 0, 48, 4).slice(1, 0, 64, 4))) << "pixel (4i, 4j)";
+
+  const Camera turned = estimate.turned(Eigen::Vector3d(0.3, -0.4, 0.1) * M_PI / 180.0);  // 0.5 degrees
+  EXPECT_THROW(sample_depth_at_camera(gt, gt_camera, turned), std::invalid_argument);
+  EXPECT_THROW(sample_depth_at_camera(gt, gt_camera, turned, 0.4), std::invalid_argument);
+  EXPECT_TRUE(sample_depth_at_camera(gt, gt_camera, turned, 1.0).equal(same_pose));
+  Camera moved = estimate;
+  moved.T_cam_world(0, 3) += 0.01;
+  EXPECT_THROW(sample_depth_at_camera(gt, gt_camera, moved, 1.0), std::invalid_argument) << "a moved centre is never accepted";
+}
+
 }  // namespace
 }  // namespace umvs
