@@ -33,7 +33,8 @@ int refine_poses(int argc, char** argv) {
   args.required("data", "MVSNet-format input folder (images/, cams/, pair.txt)")
       .required("checkpoint", "model: our checkpoint or MVSNet_pytorch weights")
       .required("out", "new output folder (refused when it holds files)")
-      .option("ref", "", "comma-separated reference view ids to measure from (default: all in pair.txt)")
+      .option("ref", "", "comma-separated reference view ids to measure from (default: all in pair.txt); views that no "
+              "measured pair names keep their poses")
       .option("sources", "2", "neighbours measured per reference, best first in pair.txt")
       .option("search-deg", "2", "largest turn about each axis per round, degrees")
       .option("rounds", "2", "measure and solve again from the corrected cameras this many times in all")
