@@ -668,6 +668,14 @@ TEST(RefinePoses, TurnsBackAViewThatIsOffAndLeavesTheImagesAsTheyAre) {
   EXPECT_THROW(refine_folder_poses(refine, estimator), std::invalid_argument);
   refine.out_dir = posed;
   EXPECT_THROW(refine_folder_poses(refine, estimator), std::invalid_argument);
+  // Nor through a planted link, even to an empty folder.
+  const std::string elsewhere = test::temp_dir("refine_elsewhere");
+  refine.out_dir = elsewhere + "_link";
+  std::filesystem::remove(refine.out_dir);
+  std::filesystem::create_directory_symlink(elsewhere, refine.out_dir);
+  EXPECT_THROW(refine_folder_poses(refine, estimator), std::invalid_argument);
+  EXPECT_TRUE(std::filesystem::is_empty(elsewhere));
+  std::filesystem::remove(refine.out_dir);
 }
 
 TEST(DefaultModel, RefinedPosesMakeTheLivingRoomsDepthBetter) {
