@@ -39,6 +39,26 @@ MvsNet moved_to(MvsNet model, const torch::Device& device) {
 constexpr double kRadiansPerDegree = M_PI / 180.0;
 // A 3x3 window whose intensities spread less than one grey level tells the turn search nothing.
 constexpr double kMinTextureStd = 1.0 / 255;
+
+// views[0] is the reference. Throws std::invalid_argument naming the view for an invalid camera,
+// an image that is not uint8 [H,W,3] of its camera's size, or one of another size than the reference.
+void validate_views(const std::vector<ViewInput>& views) {
+  for (size_t i = 0; i < views.size(); ++i) {
+    const auto& v = views[i];
+    const std::string name = i == 0 ? "reference view" : "source view " + std::to_string(i);
+    v.camera.validate(name);
+    if (!v.image.defined() || v.image.dim() != 3 || v.image.size(2) != 3 || v.image.scalar_type() != torch::kUInt8) {
+      throw std::invalid_argument(name + ": image must be uint8 [H,W,3]");
+    }
+    if (v.image.size(0) != v.camera.height || v.image.size(1) != v.camera.width) {
+      throw std::invalid_argument(name + ": image is " + std::to_string(v.image.size(1)) + "x" + std::to_string(v.image.size(0)) +
+                                  " but its camera says " + std::to_string(v.camera.width) + "x" + std::to_string(v.camera.height));
+    }
+    if (v.camera.width != views.front().camera.width || v.camera.height != views.front().camera.height) {
+      throw std::invalid_argument(name + " has another image size than the reference");
+    }
+  }
+}
 }  // namespace
 
 RotationSearch search_rotation(const std::function<double(const Eigen::Vector3d& degrees)>& score, double limit_deg) {
@@ -132,6 +152,7 @@ SourceTurn DepthEstimator::best_source_turn(const ViewInput& reference, const Vi
   if (!std::isfinite(limit_deg) || limit_deg <= 0) {
     throw std::invalid_argument("the rotation search needs a limit > 0 degrees, got " + std::to_string(limit_deg));
   }
+  validate_views({reference, source});
   // The search runs at half the network's input size (but no less than 320 wide, or the input's
   // width) and with half its planes: a quarter of the work per pass, and a tenth of a degree is
   // still 0.4 px at 320 wide with a 60-degree field of view.
@@ -173,20 +194,8 @@ DepthMap DepthEstimator::estimate(const std::vector<ViewInput>& views, double de
   std::vector<torch::Tensor> images;
   std::vector<Camera> cameras;
   const NetworkResize plan = plan_network_resize(ref.camera.width, ref.camera.height, config_.max_width, config_.max_height);
-  for (size_t i = 0; i < views.size(); ++i) {
-    const auto& v = views[i];
-    const std::string name = i == 0 ? "reference view" : "source view " + std::to_string(i);
-    v.camera.validate(name);
-    if (!v.image.defined() || v.image.dim() != 3 || v.image.size(2) != 3 || v.image.scalar_type() != torch::kUInt8) {
-      throw std::invalid_argument(name + ": image must be uint8 [H,W,3]");
-    }
-    if (v.image.size(0) != v.camera.height || v.image.size(1) != v.camera.width) {
-      throw std::invalid_argument(name + ": image is " + std::to_string(v.image.size(1)) + "x" + std::to_string(v.image.size(0)) +
-                                  " but its camera says " + std::to_string(v.camera.width) + "x" + std::to_string(v.camera.height));
-    }
-    if (v.camera.width != ref.camera.width || v.camera.height != ref.camera.height) {
-      throw std::invalid_argument(name + " has another image size than the reference");
-    }
+  validate_views(views);
+  for (const auto& v : views) {
     images.push_back(apply_network_resize(rgb8_to_float(v.image), plan));
     cameras.push_back(apply_network_resize(v.camera, plan));
   }

@@ -104,7 +104,8 @@ class DepthEstimator {
   // The rotation, within +-limit_deg about each axis, with which the pass of the reference and the
   // source alone warps the source best onto the reference (images as loaded); kept when clearly
   // better (SourceTurn::kept). What source_rotation_search_deg runs per source, and what
-  // `umvs refine-poses` measures per pair (core/pose_refinement.h).
+  // `umvs refine-poses` measures per pair (core/pose_refinement.h). Throws std::invalid_argument as
+  // estimate() does for the views, and for a limit that is not > 0.
   SourceTurn best_source_turn(const ViewInput& reference, const ViewInput& source, double depth_min, double depth_max,
                               double limit_deg);
 
