@@ -564,6 +564,33 @@ DepthEstimator estimator_at_128_planes(double search_deg) {
   return DepthEstimator(load_model(default_model(), torch::kCPU).model, torch::kCPU, config);
 }
 
+// The living room of ../shared/data imported into a new MVSNet folder named `name`.
+std::string imported_living_room(const std::string& data, const std::string& name) {
+  RgbdImportConfig import;
+  import.data_dir = data;
+  import.out_dir = test::temp_dir(name);
+  import_rgbd(import);
+  return import.out_dir;
+}
+
+TEST(DefaultModel, ARotationSearchOfMismatchedViewsIsRefusedWithTheReason) {
+  DepthEstimator estimator = estimator_at_128_planes(0.0);
+  Camera camera;
+  camera.K << 60, 0, 31.5, 0, 60, 23.5, 0, 0, 1;
+  camera.width = 64;
+  camera.height = 48;
+  const ViewInput reference{torch::zeros({48, 64, 3}, torch::kUInt8), camera};
+  const ViewInput wider{torch::zeros({48, 96, 3}, torch::kUInt8), camera};  // its camera says 64 wide
+  try {
+    estimator.best_source_turn(reference, wider, 1.0, 5.0, 2.0);
+    ADD_FAILURE() << "a source image of another size than its camera was accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_THAT(e.what(), ::testing::HasSubstr("source view 1: image is 96x48 but its camera says 64x48"));
+  }
+  EXPECT_THROW(estimator.best_source_turn(reference, reference, 1.0, 5.0, 0.0), std::invalid_argument);
+  EXPECT_THROW(estimator.best_source_turn(reference, reference, 1.0, 5.0, std::nan("")), std::invalid_argument);
+}
+
 TEST(DefaultModel, SourceRotationSearchKeepsTempleRingsExactPoses) {
   // Middlebury's calibration is exact. Earlier versions of the search turned sources of these
   // references: 18, 21 and 22 when SSIM was averaged over the black background, 29 by a noise turn
@@ -592,11 +619,7 @@ TEST(DefaultModel, SourceRotationSearchCorrectsTheLivingRoomsPoses) {
   // oracle turns source 3 by (0.62, -0.01, 0.07) degrees (docs/results.md).
   UMVS_REQUIRE_SHARED("livingroom", data);
   torch::set_num_threads(2);
-  RgbdImportConfig import;
-  import.data_dir = data;
-  import.out_dir = test::temp_dir("rotation_search_living");
-  import_rgbd(import);
-  const MvsFolder folder(import.out_dir);
+  const MvsFolder folder(imported_living_room(data, "rotation_search_living"));
   const PairInput input = pair_input(folder, 1, 2, 128);
   ASSERT_EQ(folder.pair_of(1).sources.at(0), 3);
   const auto gt = read_pfm(folder.depth_gt_path(1));
@@ -684,17 +707,13 @@ TEST(DefaultModel, RefinedPosesMakeTheLivingRoomsDepthBetter) {
   // makes better depth on every reference: abs rel 0.286 -> 0.173 over the four when measured.
   UMVS_REQUIRE_SHARED("livingroom", data);
   torch::set_num_threads(2);
-  RgbdImportConfig import;
-  import.data_dir = data;
-  import.out_dir = test::temp_dir("refine_living");
-  import_rgbd(import);
   DepthEstimator estimator = estimator_at_128_planes(0.0);
   PoseRefinementConfig refine;
-  refine.data_dir = import.out_dir;
+  refine.data_dir = imported_living_room(data, "refine_living");
   refine.out_dir = test::temp_dir("refine_living_out");
   refine_folder_poses(refine, estimator);
   EXPECT_FALSE(std::filesystem::exists(refine.out_dir + "/depth_gt")) << "the ground truth is not copied";
-  const MvsFolder given(import.out_dir), refined(refine.out_dir);
+  const MvsFolder given(refine.data_dir), refined(refine.out_dir);
   double sum_given = 0, sum_refined = 0;
   for (const int ref : {1, 2, 4, 5}) {
     const auto gt = read_pfm(given.depth_gt_path(ref));
