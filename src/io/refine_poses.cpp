@@ -5,8 +5,10 @@
 #include <filesystem>
 #include <Eigen/Geometry>
 #include <map>
+#include <optional>
 #include <stdexcept>
 
+#include "unsup_mvs/core/keyframe_pose_refiner.h"
 #include "unsup_mvs/io/atomic_file.h"
 #include "unsup_mvs/io/file_safety.h"
 #include "unsup_mvs/io/mvs_folder.h"
@@ -99,15 +101,9 @@ PoseRefinementResult refine_folder_poses(const PoseRefinementConfig& config, Dep
       measured.source = source;
       measured.turn = estimator.best_source_turn({view(ref).image, cameras.at(ref)}, {view(source).image, cameras.at(source)},
                                                  cam.depth_min, cam.resolved_depth_max(estimator.num_depth()), config.search_deg);
-      // A kept turn is measured; when the search finds no clearly better turn, the pair's relative
-      // pose is right as it is (zero turn); when the search and the full-size check disagree, the
-      // pair says nothing.
-      if (measured.turn.kept) {
-        measurements.push_back({ref, source, measured.turn.degrees});
-      } else if (measured.turn.search_gain < kMinSourceTurnGain) {
-        measurements.push_back({ref, source, Eigen::Vector3d::Zero()});
-      }
-      measured.used = measured.turn.kept || measured.turn.search_gain < kMinSourceTurnGain;
+      const std::optional<Eigen::Vector3d> relative_turn = measured_pair_turn(measured.turn);
+      if (relative_turn) measurements.push_back({ref, source, *relative_turn});
+      measured.used = relative_turn.has_value();
       result.pairs.push_back(measured);
       if (on_pair) on_pair(static_cast<int>(result.pairs.size()), total, measured);
     }

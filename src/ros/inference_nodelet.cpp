@@ -25,6 +25,7 @@
 #include "unsup_mvs/ReloadModel.h"
 #include "unsup_mvs/core/depth_estimator.h"
 #include "unsup_mvs/core/device.h"
+#include "unsup_mvs/core/keyframe_pose_refiner.h"
 #include "unsup_mvs/core/latest_slot.h"
 #include "unsup_mvs/io/ros/ros_conversions.h"
 #include "unsup_mvs/io/checkpoint.h"
@@ -113,6 +114,10 @@ class InferenceNodelet : public nodelet::Nodelet {
       max_planes_ = c.max_planes;
       max_checkpoint_bytes_ = static_cast<uint64_t>(c.max_checkpoint_mb) << 20;
       reload_timeout_ = c.reload_timeout;
+      if (c.pose_refinement_deg > 0) {
+        pose_refiner_ = std::make_unique<umvs::KeyframePoseRefiner>(umvs::KeyframePoseRefinerConfig{
+            c.pose_refinement_deg, static_cast<size_t>(c.pose_refinement_keyframes)});
+      }
       pending_ = std::make_unique<umvs::LatestSlot<unsup_mvs::KeyframeSetConstPtr>>(static_cast<size_t>(c.queue_size));
     } catch (const std::exception& e) {
       NODELET_FATAL("inference: invalid parameters: %s", e.what());
@@ -225,6 +230,7 @@ class InferenceNodelet : public nodelet::Nodelet {
     {
       std::lock_guard<std::mutex> lock(model_mutex_);
       if (!estimator_) throw std::runtime_error("no model loaded (set ~checkpoint or call reload_model)");
+      if (pose_refiner_) views = refinedViews(set, std::move(views));
       map = estimator_->estimate(views, set.depth_min, set.depth_max);
       served = checkpoint_;
     }
@@ -237,7 +243,9 @@ class InferenceNodelet : public nodelet::Nodelet {
     out.image = umvs::rgb8_to_image_msg(map.color, header);
     out.camera_info = umvs::camera_info_from_camera(map.camera, header);
     out.world_frame = set.header.frame_id;
-    out.pose = set.reference_pose;
+    // The reference's pose as the depth map was made: turned when the poses are refined, so that
+    // fusion places it where it agrees with the other keyframes.
+    out.pose = pose_refiner_ ? umvs::matrix_to_pose(map.camera.T_cam_world.inverse()) : set.reference_pose;
     out.depth_min = set.depth_min;
     out.depth_max = set.depth_max;
     out.inference_seconds = static_cast<float>(map.seconds);
@@ -261,6 +269,25 @@ class InferenceNodelet : public nodelet::Nodelet {
                     100.0 * turn.full_size_gain);
     }
     publishDiagnostics(total, map.seconds, latency, served);
+  }
+
+  // The keyframe set's views with their cameras corrected by the online pose refinement (under
+  // model_mutex_). A set without an id per source is served with its poses as given.
+  std::vector<umvs::ViewInput> refinedViews(const unsup_mvs::KeyframeSet& set, std::vector<umvs::ViewInput> views) {
+    if (set.source_ids.size() != set.source_images.size()) {
+      NODELET_WARN_THROTTLE(10.0, "inference: keyframe set %u has %zu source ids for %zu sources; its poses are not refined",
+                            set.reference_id, set.source_ids.size(), set.source_images.size());
+      return views;
+    }
+    std::vector<int64_t> ids{static_cast<int64_t>(set.reference_id)};
+    for (const auto id : set.source_ids) ids.push_back(static_cast<int64_t>(id));
+    views = pose_refiner_->correct(*estimator_, ids, std::move(views), set.depth_min, set.depth_max);
+    const Eigen::Vector3d turn = pose_refiner_->turn_degrees(ids.front());
+    NODELET_DEBUG("inference: keyframe %u: %d new pair measurements, %zu pairs over %zu keyframes; reference turned by "
+                  "(%.2f, %.2f, %.2f) deg",
+                  set.reference_id, pose_refiner_->last_new_measurements(), pose_refiner_->measured_pairs(),
+                  pose_refiner_->keyframes(), turn.x(), turn.y(), turn.z());
+    return views;
   }
 
   void publishDiagnostics(double total, double network, double latency, const std::string& served) {
@@ -407,6 +434,7 @@ class InferenceNodelet : public nodelet::Nodelet {
   std::string checkpoint_;
   std::mutex model_mutex_;
   std::unique_ptr<umvs::DepthEstimator> estimator_;
+  std::unique_ptr<umvs::KeyframePoseRefiner> pose_refiner_;  // ~pose_refinement_deg > 0; used under model_mutex_
 
   // resource bounds (docs/reliability.md)
   int max_image_pixels_ = kDefaultMaxImagePixels, max_views_ = 16, max_planes_ = 256;

@@ -3,6 +3,7 @@
 #include <nodelet/loader.h>
 #include <ros/ros.h>
 
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <stdexcept>
@@ -72,6 +73,12 @@ void InferenceNodeConfig::validate() const {
                                 "and reload_timeout > 0");
   }
   if (queue_size < 1) throw std::invalid_argument("queue_size must be >= 1, got " + std::to_string(queue_size));
+  if (!std::isfinite(pose_refinement_deg) || pose_refinement_deg < 0) {
+    throw std::invalid_argument("pose_refinement_deg must be an angle >= 0 (0 = off), got " + std::to_string(pose_refinement_deg));
+  }
+  if (pose_refinement_keyframes < 2) {
+    throw std::invalid_argument("pose_refinement_keyframes must be >= 2, got " + std::to_string(pose_refinement_keyframes));
+  }
   if (estimator.num_depth > max_planes) {
     throw std::invalid_argument("num_depth " + std::to_string(estimator.num_depth) + " is more than max_planes " +
                                 std::to_string(max_planes));
@@ -97,6 +104,8 @@ InferenceNodeConfig inference_node_config_from_ros(const ros::NodeHandle& nh) {
   nh.param("max_checkpoint_mb", c.max_checkpoint_mb, c.max_checkpoint_mb);
   nh.param("reload_timeout", c.reload_timeout, c.reload_timeout);
   nh.param("queue_size", c.queue_size, c.queue_size);
+  nh.param("pose_refinement_deg", c.pose_refinement_deg, c.pose_refinement_deg);
+  nh.param("pose_refinement_keyframes", c.pose_refinement_keyframes, c.pose_refinement_keyframes);
   c.validate();
   return c;
 }

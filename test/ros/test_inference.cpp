@@ -194,6 +194,49 @@ TEST_F(InferenceTest, NewestSetsWinWhenBusy) {
   EXPECT_EQ(estimates_.back()->keyframe_id, 105u);
 }
 
+TEST_F(InferenceTest, RefinedPosesAreSentWithTheirEstimates) {
+  // inference.test's second node refines the keyframes' poses online. Sources that are the
+  // reference's own image from its own pose agree as posed: no turn, so the estimate carries the
+  // pose as given (through the refinement's camera and back). A set without source ids is served
+  // with its poses as given, and a warning says why.
+  umvs_test::RosoutCapture log(nh_);
+  ros::Publisher pub = nh_.advertise<unsup_mvs::KeyframeSet>("/refining/keyframes", 10);
+  ros::ServiceClient reload = nh_.serviceClient<unsup_mvs::ReloadModel>("/inference_refining/reload_model");
+  ASSERT_TRUE(reload.waitForExistence(ros::Duration(30.0))) << "inference_refining did not come up";
+  std::vector<unsup_mvs::DepthEstimateConstPtr> got;
+  ros::Subscriber sub = nh_.subscribe<unsup_mvs::DepthEstimate>(
+      "/refining/depth_estimate", 10, [&](const unsup_mvs::DepthEstimateConstPtr& m) { got.push_back(m); });
+  ASSERT_TRUE(wait_for([&] { return pub.getNumSubscribers() > 0; }, 10.0));
+  unsup_mvs::ReloadModel srv;
+  srv.request.checkpoint = dir_ + "/model.pt";
+  ASSERT_TRUE(reload.call(srv) && srv.response.success) << srv.response.message;
+
+  auto set = make_set(40);
+  set.reference_pose = umvs_test::make_pose({0.2, -0.1, 0.3}, 5.0);
+  for (size_t s = 0; s < set.source_images.size(); ++s) {
+    set.source_images[s] = set.reference_image;
+    set.source_poses[s] = set.reference_pose;
+  }
+  pub.publish(set);
+  ASSERT_TRUE(wait_for([&] { return !got.empty(); }, 60.0)) << log.all();
+  const geometry_msgs::Pose& sent = got.front()->pose;
+  const geometry_msgs::Pose& given = set.reference_pose;
+  EXPECT_NEAR(sent.position.x, given.position.x, 1e-9);
+  EXPECT_NEAR(sent.position.y, given.position.y, 1e-9);
+  EXPECT_NEAR(sent.position.z, given.position.z, 1e-9);
+  const double dot = sent.orientation.w * given.orientation.w + sent.orientation.x * given.orientation.x +
+                     sent.orientation.y * given.orientation.y + sent.orientation.z * given.orientation.z;
+  EXPECT_NEAR(std::abs(dot), 1.0, 1e-9) << "the reference was turned";
+
+  auto without_ids = set;
+  without_ids.reference_id = 50;
+  without_ids.source_ids.clear();
+  pub.publish(without_ids);
+  EXPECT_TRUE(log.wait_for("its poses are not refined", 30.0)) << log.all();
+  ASSERT_TRUE(wait_for([&] { return got.size() == 2; }, 60.0)) << log.all();
+  EXPECT_EQ(got.back()->keyframe_id, 50u);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {

@@ -43,6 +43,10 @@ struct InferenceNodeConfig {
   int max_checkpoint_mb = 256;
   double reload_timeout = 60.0;  // s
   int queue_size = 4;  // keyframe sets waiting while the network is busy (the oldest is dropped beyond)
+  // > 0: correct the keyframes' orientations online (umvs::KeyframePoseRefiner, this search limit
+  // in degrees); 0 = off. The refiner remembers pose_refinement_keyframes keyframes.
+  double pose_refinement_deg = 0.0;
+  int pose_refinement_keyframes = 100;
   void validate() const;
 };
 InferenceNodeConfig inference_node_config_from_ros(const ros::NodeHandle& nh);
