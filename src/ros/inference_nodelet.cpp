@@ -312,6 +312,10 @@ class InferenceNodelet : public nodelet::Nodelet {
     kv("last_latency_s", std::to_string(latency));
     kv("mean_total_s", std::to_string(seconds_sum_ / std::max(1L, processed_)));
     kv("checkpoint", served);
+    // pose_refiner_ is used by this (the worker) thread only.
+    kv("pose_refinement", pose_refiner_ ? std::to_string(pose_refiner_->measured_pairs()) + " pairs over " +
+                                              std::to_string(pose_refiner_->keyframes()) + " keyframes"
+                                        : "off");
     array.status.push_back(status);
     diagnostics_pub_.publish(array);
   }
@@ -434,7 +438,8 @@ class InferenceNodelet : public nodelet::Nodelet {
   std::string checkpoint_;
   std::mutex model_mutex_;
   std::unique_ptr<umvs::DepthEstimator> estimator_;
-  std::unique_ptr<umvs::KeyframePoseRefiner> pose_refiner_;  // ~pose_refinement_deg > 0; used under model_mutex_
+  // ~pose_refinement_deg > 0; used by the worker thread only (in process(), under model_mutex_ with the estimator)
+  std::unique_ptr<umvs::KeyframePoseRefiner> pose_refiner_;
 
   // resource bounds (docs/reliability.md)
   int max_image_pixels_ = kDefaultMaxImagePixels, max_views_ = 16, max_planes_ = 256;
