@@ -55,18 +55,20 @@ umvs::ViewInput view_from_msg(const sensor_msgs::Image& image, const sensor_msgs
 }
 
 // The live-tunable network settings (cfg/Inference.cfg), both ways.
-unsup_mvs::InferenceConfig to_reconfigure(const umvs::DepthEstimatorConfig& c) {
+unsup_mvs::InferenceConfig to_reconfigure(const InferenceNodeConfig& c) {
   unsup_mvs::InferenceConfig r = unsup_mvs::InferenceConfig::__getDefault__();
-  r.max_width = c.max_width;
-  r.max_height = c.max_height;
-  r.num_depth = c.num_depth;
+  r.max_width = c.estimator.max_width;
+  r.max_height = c.estimator.max_height;
+  r.num_depth = c.estimator.num_depth;
+  r.pose_refinement_deg = c.pose_refinement_deg;
   return r;
 }
 
-umvs::DepthEstimatorConfig with_reconfigure(umvs::DepthEstimatorConfig c, const unsup_mvs::InferenceConfig& r) {
-  c.max_width = r.max_width;
-  c.max_height = r.max_height;
-  c.num_depth = r.num_depth;
+InferenceNodeConfig with_reconfigure(InferenceNodeConfig c, const unsup_mvs::InferenceConfig& r) {
+  c.estimator.max_width = r.max_width;
+  c.estimator.max_height = r.max_height;
+  c.estimator.num_depth = r.num_depth;
+  c.pose_refinement_deg = r.pose_refinement_deg;
   return c;
 }
 
@@ -85,6 +87,13 @@ std::unique_ptr<umvs::DepthEstimator> make_estimator(const umvs::MvsNet& model, 
                                 " (set ~num_depth to override the checkpoint's)");
   }
   return estimator;
+}
+
+// The online pose refinement the node's settings ask for (nullptr when off).
+std::unique_ptr<umvs::KeyframePoseRefiner> make_pose_refiner(const InferenceNodeConfig& c) {
+  if (c.pose_refinement_deg <= 0) return nullptr;
+  return std::make_unique<umvs::KeyframePoseRefiner>(
+      umvs::KeyframePoseRefinerConfig{c.pose_refinement_deg, static_cast<size_t>(c.pose_refinement_keyframes)});
 }
 
 }  // namespace
@@ -114,10 +123,7 @@ class InferenceNodelet : public nodelet::Nodelet {
       max_planes_ = c.max_planes;
       max_checkpoint_bytes_ = static_cast<uint64_t>(c.max_checkpoint_mb) << 20;
       reload_timeout_ = c.reload_timeout;
-      if (c.pose_refinement_deg > 0) {
-        pose_refiner_ = std::make_unique<umvs::KeyframePoseRefiner>(umvs::KeyframePoseRefinerConfig{
-            c.pose_refinement_deg, static_cast<size_t>(c.pose_refinement_keyframes)});
-      }
+      pose_refiner_ = make_pose_refiner(c);
       pending_ = std::make_unique<umvs::LatestSlot<unsup_mvs::KeyframeSetConstPtr>>(static_cast<size_t>(c.queue_size));
     } catch (const std::exception& e) {
       NODELET_FATAL("inference: invalid parameters: %s", e.what());
@@ -155,18 +161,19 @@ class InferenceNodelet : public nodelet::Nodelet {
     reload_spinner_->start();
     worker_ = std::thread(&InferenceNodelet::work, this);
     reconfigure_ = std::make_unique<ReconfigureServer<unsup_mvs::InferenceConfig>>(
-        pnh, "inference", to_reconfigure(config_), [this](const unsup_mvs::InferenceConfig& r) { onReconfigure(r); });
+        pnh, "inference", to_reconfigure(node_), [this](const unsup_mvs::InferenceConfig& r) { onReconfigure(r); });
   }
 
-  // A new resolution or plane count from dynamic_reconfigure: checked as at start-up, then the
+  // A new resolution, plane count or pose refinement limit from dynamic_reconfigure: checked as at start-up, then the
   // served model is rebuilt with it for the next keyframe set (after the one running, if any).
   // Throws std::invalid_argument (naming the parameter) and changes nothing when invalid.
   void onReconfigure(const unsup_mvs::InferenceConfig& request) {
-    InferenceNodeConfig next = node_;
-    next.estimator = with_reconfigure(node_.estimator, request);
+    InferenceNodeConfig next = with_reconfigure(node_, request);
     next.validate();
     std::lock_guard<std::mutex> lock(model_mutex_);
     if (estimator_) estimator_ = make_estimator(estimator_->model(), device_, next.estimator, max_planes_);
+    // A new search limit starts afresh: pairs measured with the old one are measured again.
+    if (next.pose_refinement_deg != node_.pose_refinement_deg) pose_refiner_ = make_pose_refiner(next);
     config_ = next.estimator;
     node_ = next;
   }
@@ -227,10 +234,16 @@ class InferenceNodelet : public nodelet::Nodelet {
     }
     umvs::DepthMap map;
     std::string served;
+    bool refined = false;
+    std::string refinement = "off";
     {
       std::lock_guard<std::mutex> lock(model_mutex_);
       if (!estimator_) throw std::runtime_error("no model loaded (set ~checkpoint or call reload_model)");
-      if (pose_refiner_) views = refinedViews(set, std::move(views));
+      if (pose_refiner_) {
+        refined = refineViews(set, &views);
+        refinement = std::to_string(pose_refiner_->measured_pairs()) + " pairs over " +
+                     std::to_string(pose_refiner_->keyframes()) + " keyframes";
+      }
       map = estimator_->estimate(views, set.depth_min, set.depth_max);
       served = checkpoint_;
     }
@@ -245,7 +258,7 @@ class InferenceNodelet : public nodelet::Nodelet {
     out.world_frame = set.header.frame_id;
     // The reference's pose as the depth map was made: turned when the poses are refined, so that
     // fusion places it where it agrees with the other keyframes.
-    out.pose = pose_refiner_ ? umvs::matrix_to_pose(map.camera.T_cam_world.inverse()) : set.reference_pose;
+    out.pose = refined ? umvs::matrix_to_pose(map.camera.T_cam_world.inverse()) : set.reference_pose;
     out.depth_min = set.depth_min;
     out.depth_max = set.depth_max;
     out.inference_seconds = static_cast<float>(map.seconds);
@@ -268,29 +281,30 @@ class InferenceNodelet : public nodelet::Nodelet {
                     set.reference_id, s + 1, turn.degrees.x(), turn.degrees.y(), turn.degrees.z(),
                     100.0 * turn.full_size_gain);
     }
-    publishDiagnostics(total, map.seconds, latency, served);
+    publishDiagnostics(total, map.seconds, latency, served, refinement);
   }
 
-  // The keyframe set's views with their cameras corrected by the online pose refinement (under
-  // model_mutex_). A set without an id per source is served with its poses as given.
-  std::vector<umvs::ViewInput> refinedViews(const unsup_mvs::KeyframeSet& set, std::vector<umvs::ViewInput> views) {
+  // Corrects the keyframe set's cameras by the online pose refinement (under model_mutex_) and says
+  // whether it did: a set without an id per source is served with its poses as given.
+  bool refineViews(const unsup_mvs::KeyframeSet& set, std::vector<umvs::ViewInput>* views) {
     if (set.source_ids.size() != set.source_images.size()) {
       NODELET_WARN_THROTTLE(10.0, "inference: keyframe set %u has %zu source ids for %zu sources; its poses are not refined",
                             set.reference_id, set.source_ids.size(), set.source_images.size());
-      return views;
+      return false;
     }
     std::vector<int64_t> ids{static_cast<int64_t>(set.reference_id)};
     for (const auto id : set.source_ids) ids.push_back(static_cast<int64_t>(id));
-    views = pose_refiner_->correct(*estimator_, ids, std::move(views), set.depth_min, set.depth_max);
+    *views = pose_refiner_->correct(*estimator_, ids, std::move(*views), set.depth_min, set.depth_max);
     const Eigen::Vector3d turn = pose_refiner_->turn_degrees(ids.front());
     NODELET_DEBUG("inference: keyframe %u: %d new pair measurements, %zu pairs over %zu keyframes; reference turned by "
                   "(%.2f, %.2f, %.2f) deg",
                   set.reference_id, pose_refiner_->last_new_measurements(), pose_refiner_->measured_pairs(),
                   pose_refiner_->keyframes(), turn.x(), turn.y(), turn.z());
-    return views;
+    return true;
   }
 
-  void publishDiagnostics(double total, double network, double latency, const std::string& served) {
+  void publishDiagnostics(double total, double network, double latency, const std::string& served,
+                          const std::string& refinement) {
     diagnostic_msgs::DiagnosticArray array;
     array.header.stamp = ros::Time::now();
     diagnostic_msgs::DiagnosticStatus status;
@@ -312,10 +326,7 @@ class InferenceNodelet : public nodelet::Nodelet {
     kv("last_latency_s", std::to_string(latency));
     kv("mean_total_s", std::to_string(seconds_sum_ / std::max(1L, processed_)));
     kv("checkpoint", served);
-    // pose_refiner_ is used by this (the worker) thread only.
-    kv("pose_refinement", pose_refiner_ ? std::to_string(pose_refiner_->measured_pairs()) + " pairs over " +
-                                              std::to_string(pose_refiner_->keyframes()) + " keyframes"
-                                        : "off");
+    kv("pose_refinement", refinement);
     array.status.push_back(status);
     diagnostics_pub_.publish(array);
   }
@@ -438,8 +449,7 @@ class InferenceNodelet : public nodelet::Nodelet {
   std::string checkpoint_;
   std::mutex model_mutex_;
   std::unique_ptr<umvs::DepthEstimator> estimator_;
-  // ~pose_refinement_deg > 0; used by the worker thread only (in process(), under model_mutex_ with the estimator)
-  std::unique_ptr<umvs::KeyframePoseRefiner> pose_refiner_;
+  std::unique_ptr<umvs::KeyframePoseRefiner> pose_refiner_;  // ~pose_refinement_deg > 0 (else null); under model_mutex_
 
   // resource bounds (docs/reliability.md)
   int max_image_pixels_ = kDefaultMaxImagePixels, max_views_ = 16, max_planes_ = 256;

@@ -4,6 +4,7 @@
 // invalid one (allowed by the cfg ranges, refused by the start-up validation) is logged naming the
 // parameter, the reported config and the parameter server keep the old values, and the node keeps
 // working with them.
+#include <diagnostic_msgs/DiagnosticArray.h>
 #include <dynamic_reconfigure/Config.h>
 #include <dynamic_reconfigure/Reconfigure.h>
 #include <sensor_msgs/PointCloud2.h>
@@ -245,7 +246,7 @@ unsup_mvs::KeyframeSet make_set(uint32_t id) {
   return s;
 }
 
-TEST(InferenceReconfigureTest, ResolutionTakesEffectAndBadValuesAreRefused) {
+TEST(InferenceReconfigureTest, ResolutionAndPoseRefinementTakeEffectAndBadValuesAreRefused) {
   ros::NodeHandle nh;
   umvs_test::RosoutCapture log(nh);
   auto c = reconfigure(kInference);
@@ -300,6 +301,27 @@ TEST(InferenceReconfigureTest, ResolutionTakesEffectAndBadValuesAreRefused) {
   EXPECT_EQ(e->depth.width, 16u);
   EXPECT_EQ(e->depth.height, 8u);
   EXPECT_NEAR(e->camera_info.K[0], 100.0 * 0.5 / 4, 1e-9);
+
+  // The online pose refinement turns on and off live; /diagnostics says what it knows.
+  std::string refinement;
+  ros::Subscriber diagnostics = nh.subscribe<diagnostic_msgs::DiagnosticArray>(
+      "/diagnostics", 10, [&](const diagnostic_msgs::DiagnosticArrayConstPtr& m) {
+        for (const auto& status : m->status) {
+          for (const auto& value : status.values) {
+            if (value.key == "pose_refinement") refinement = value.value;
+          }
+        }
+      });
+  ASSERT_TRUE(wait_for([&] { return diagnostics.getNumPublishers() > 0; }, 10.0));
+  EXPECT_DOUBLE_EQ(double_of(c, "pose_refinement_deg"), 0.0);
+  c = reconfigure(kInference, Request().set("pose_refinement_deg", 1.0));
+  EXPECT_DOUBLE_EQ(double_of(c, "pose_refinement_deg"), 1.0);
+  ASSERT_TRUE(estimate(3)) << log.all();
+  EXPECT_TRUE(wait_for([&] { return refinement == "2 pairs over 3 keyframes"; }, 10.0)) << refinement;
+  c = reconfigure(kInference, Request().set("pose_refinement_deg", 0.0));
+  EXPECT_DOUBLE_EQ(double_of(c, "pose_refinement_deg"), 0.0);
+  ASSERT_TRUE(estimate(4)) << log.all();
+  EXPECT_TRUE(wait_for([&] { return refinement == "off"; }, 10.0)) << refinement;
 }
 
 }  // namespace
