@@ -647,20 +647,34 @@ double relative_orientation_error_deg(const MvsFolder& cams, const MvsFolder& re
   return Eigen::AngleAxisd(relative(cams, a, b) * relative(reference, a, b).transpose()).angle() * 180.0 / M_PI;
 }
 
-TEST(RefinePoses, TurnsBackAViewThatIsOffAndLeavesTheImagesAsTheyAre) {
-  // A rendered room with exact poses, one view's camera turned by (0.6, -0.5, 0.3) degrees in its
-  // cam file: 0.8 degrees, 4 pixels at 320 wide. The refinement must give every pair of views its
-  // true relative orientation back (within 0.3 degrees) without turning the exact ones apart.
-  torch::set_num_threads(2);
-  const std::string exact = write_room("refine_exact", 81, false, 320, 256);
-  const std::string posed = test::temp_dir("refine_posed");
-  std::filesystem::copy(exact, posed, std::filesystem::copy_options::recursive);
-  const MvsFolder exact_folder(exact), posed_folder(posed);
-  const int off_view = posed_folder.pairs().at(2).ref;
-  MvsCam off = read_cam_file(posed_folder.cam_path(off_view));
+// A rendered room at 320x256 with exact poses (`exact`), and a copy (`posed`) whose third view's
+// camera is turned in its cam file by (0.6, -0.5, 0.3) degrees: 0.8 degrees, 4 pixels at 320 wide.
+struct RoomWithOneViewOff {
+  std::string exact, posed;
+  int off_view = 0;
+};
+RoomWithOneViewOff room_with_one_view_off(const std::string& name) {
+  RoomWithOneViewOff room;
+  room.exact = write_room(name + "_exact", 81, false, 320, 256);
+  room.posed = test::temp_dir(name + "_posed");
+  std::filesystem::copy(room.exact, room.posed, std::filesystem::copy_options::recursive);
+  const MvsFolder posed(room.posed);
+  room.off_view = posed.pairs().at(2).ref;
+  MvsCam off = read_cam_file(posed.cam_path(room.off_view));
   off.camera = off.camera.turned(Eigen::Vector3d(0.6, -0.5, 0.3) * M_PI / 180.0);
-  std::filesystem::remove(posed_folder.cam_path(off_view));
-  write_cam_file(posed_folder.cam_path(off_view), off);
+  std::filesystem::remove(posed.cam_path(room.off_view));
+  write_cam_file(posed.cam_path(room.off_view), off);
+  return room;
+}
+
+TEST(RefinePoses, TurnsBackAViewThatIsOffAndLeavesTheImagesAsTheyAre) {
+  // The refinement must give every pair of views its true relative orientation back (within 0.3
+  // degrees) without turning the exact ones apart.
+  torch::set_num_threads(2);
+  const RoomWithOneViewOff room = room_with_one_view_off("refine");
+  const std::string& posed = room.posed;
+  const int off_view = room.off_view;
+  const MvsFolder exact_folder(room.exact), posed_folder(posed);
 
   DepthEstimatorConfig config;
   config.num_depth = 64;  // umvs refine-poses' default at 320 wide
@@ -746,19 +760,12 @@ KeyframeSetInput keyframe_set(const MvsFolder& folder, int ref, int sources, int
 }
 
 TEST(KeyframePoseRefiner, TurnsBackAKeyframeThatIsOffMeasuresEachPairOnceAndForgetsOneThatMoved) {
-  // The stream of keyframe sets the inference nodelet gets, from a rendered room whose view 3 is
-  // turned by 0.8 degrees (as in RefinePoses above): each set is served with corrected cameras.
+  // The stream of keyframe sets the inference nodelet gets, from the room of RefinePoses above
+  // with one view off by 0.8 degrees: each set is served with corrected cameras.
   torch::set_num_threads(2);
-  const std::string exact = write_room("online_refine_exact", 81, false, 320, 256);
-  const std::string posed = test::temp_dir("online_refine_posed");
-  std::filesystem::copy(exact, posed, std::filesystem::copy_options::recursive);
-  const MvsFolder exact_folder(exact), posed_folder(posed);
-  const int off_view = posed_folder.pairs().at(2).ref;
-  MvsCam off = read_cam_file(posed_folder.cam_path(off_view));
-  const Camera exact_off_camera = off.camera;
-  off.camera = off.camera.turned(Eigen::Vector3d(0.6, -0.5, 0.3) * M_PI / 180.0);
-  std::filesystem::remove(posed_folder.cam_path(off_view));
-  write_cam_file(posed_folder.cam_path(off_view), off);
+  const RoomWithOneViewOff room = room_with_one_view_off("online_refine");
+  const int off_view = room.off_view;
+  const MvsFolder exact_folder(room.exact), posed_folder(room.posed);
 
   DepthEstimatorConfig config;
   config.num_depth = 64;
@@ -811,7 +818,7 @@ TEST(KeyframePoseRefiner, TurnsBackAKeyframeThatIsOffMeasuresEachPairOnceAndForg
   // A SLAM back end corrects the off keyframe: its pairs are measured again, from its new pose.
   const size_t pairs_before = refiner.measured_pairs();
   KeyframeSetInput moved = keyframe_set(posed_folder, off_view, 2, 64);
-  moved.input.views[0].camera.T_cam_world = exact_off_camera.T_cam_world;
+  moved.input.views[0].camera.T_cam_world = exact_folder.load_view(off_view).cam.camera.T_cam_world;
   refiner.correct(estimator, moved.ids, moved.input.views, moved.input.depth_min, moved.input.depth_max);
   EXPECT_EQ(refiner.last_new_measurements(), 2);
   EXPECT_LT(refiner.measured_pairs(), pairs_before) << "the pairs that named its old pose as a source are forgotten";
