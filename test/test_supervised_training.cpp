@@ -837,6 +837,13 @@ TEST(KeyframePoseRefiner, TurnsBackAKeyframeThatIsOffMeasuresEachPairOnceAndForg
                std::invalid_argument);
   EXPECT_EQ(refiner.measured_pairs(), pairs_known);
   EXPECT_EQ(refiner.keyframes(), keyframes_known);
+  KeyframePoseRefiner remembers_two(KeyframePoseRefinerConfig{2.0, 2});
+  try {
+    remembers_two.correct(estimator, good.ids, good.input.views, good.input.depth_min, good.input.depth_max);
+    ADD_FAILURE() << "a set of 3 views was accepted by a refiner that remembers 2 keyframes";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_THAT(e.what(), ::testing::HasSubstr("a set of 3 views, more than the 2 keyframes it remembers"));
+  }
   EXPECT_THROW(KeyframePoseRefiner(KeyframePoseRefinerConfig{0.0, 100}), std::invalid_argument);
   EXPECT_THROW(KeyframePoseRefiner(KeyframePoseRefinerConfig{2.0, 1}), std::invalid_argument);
 }

@@ -72,6 +72,10 @@ std::vector<ViewInput> KeyframePoseRefiner::correct(DepthEstimator& estimator, c
     throw std::invalid_argument("pose refinement: " + std::to_string(ids.size()) + " keyframe ids for " +
                                 std::to_string(views.size()) + " views");
   }
+  if (views.size() > config_.max_keyframes) {  // it would forget its own keyframes
+    throw std::invalid_argument("pose refinement: a set of " + std::to_string(views.size()) + " views, more than the " +
+                                std::to_string(config_.max_keyframes) + " keyframes it remembers");
+  }
   if (std::set<int64_t>(ids.begin(), ids.end()).size() != ids.size()) {
     throw std::invalid_argument("pose refinement: a keyframe id appears twice in one set");
   }

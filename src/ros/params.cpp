@@ -76,8 +76,9 @@ void InferenceNodeConfig::validate() const {
   if (!std::isfinite(pose_refinement_deg) || pose_refinement_deg < 0) {
     throw std::invalid_argument("pose_refinement_deg must be an angle >= 0 (0 = off), got " + std::to_string(pose_refinement_deg));
   }
-  if (pose_refinement_keyframes < 2) {
-    throw std::invalid_argument("pose_refinement_keyframes must be >= 2, got " + std::to_string(pose_refinement_keyframes));
+  if (pose_refinement_keyframes < max_views) {  // a set's keyframes must all be remembered
+    throw std::invalid_argument("pose_refinement_keyframes must be at least max_views (" + std::to_string(max_views) +
+                                "), got " + std::to_string(pose_refinement_keyframes));
   }
   if (estimator.num_depth > max_planes) {
     throw std::invalid_argument("num_depth " + std::to_string(estimator.num_depth) + " is more than max_planes " +

@@ -37,7 +37,8 @@ class KeyframePoseRefiner {
   // (ids[0], ids[s]) not measured yet, solves over every pair measured, and returns the views with
   // their cameras turned about their centres. A keyframe whose pose as given differs from the one
   // it was measured with (a SLAM back end moved it) forgets its pairs first. Throws
-  // std::invalid_argument for ids that do not match the views or repeat, and as
+  // std::invalid_argument for ids that do not match the views or repeat, more views than
+  // max_keyframes, and as
   // DepthEstimator::best_source_turn does for the views; it then remembers nothing of this set.
   std::vector<ViewInput> correct(DepthEstimator& estimator, const std::vector<int64_t>& ids, std::vector<ViewInput> views,
                                  double depth_min, double depth_max);
