@@ -1,6 +1,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 
 #include "unsup_mvs/core/keyframes.h"
 
@@ -205,6 +206,53 @@ TEST(Keyframes, LookaheadGivesNeighboursOnBothSides) {
   bad = cfg;
   bad.buffer_size = cfg.num_sources + cfg.lookahead;  // needs one more
   EXPECT_THROW(KeyframeBuffer{bad}, std::invalid_argument);
+}
+
+TEST(Keyframes, AKeyframeWaitsForItsLookaheadAtMostMaxWait) {
+  // A robot that stops: its newest keyframe gets no newer one to wait for. The frames that keep
+  // coming (their stamps as `now`) release it max_wait_s after it was taken, with the neighbours
+  // it has (the keyframes before it).
+  KeyframeConfig cfg;  // lookahead 1, max_wait_s 2, the defaults
+  ASSERT_EQ(cfg.max_wait_s, 2.0);
+  KeyframeBuffer buffer(cfg);
+  references_while_adding(buffer, sideways_drive(4, 0.3));  // keyframe k at stamp k
+  ASSERT_EQ(buffer.waiting_references(), 1u);
+  EXPECT_TRUE(buffer.take_ready_references(2.0).empty()) << "no clock: it waits for a newer keyframe";
+  EXPECT_TRUE(buffer.take_ready_references(2.0, nullptr, 4.99).empty()) << "1.99 s after keyframe 3";
+  const auto released = buffer.take_ready_references(2.0, nullptr, 5.0);
+  ASSERT_EQ(released.size(), 1u);
+  EXPECT_EQ(released[0].reference_id, 3);
+  ASSERT_EQ(released[0].sources.size(), 2u);
+  EXPECT_EQ(std::max(released[0].sources[0].id, released[0].sources[1].id), 2) << "the neighbours before it";
+  EXPECT_EQ(buffer.waiting_references(), 0u);
+  EXPECT_TRUE(buffer.take_ready_references(2.0, nullptr, 9.0).empty()) << "a keyframe is a reference once";
+
+  // The next keyframe is waited for as before; a stamp older than a keyframe releases nothing.
+  buffer.add(camera_at({1.2, 0, 0}), 9.0);
+  EXPECT_TRUE(buffer.take_ready_references(2.0, nullptr, 10.0).empty());
+  EXPECT_TRUE(buffer.take_ready_references(2.0, nullptr, 3.0).empty());
+
+  // max_wait_s 0: the lookahead is waited for however long it takes.
+  KeyframeConfig patient = cfg;
+  patient.max_wait_s = 0;
+  KeyframeBuffer forever(patient);
+  references_while_adding(forever, sideways_drive(4, 0.3));
+  EXPECT_TRUE(forever.take_ready_references(2.0, nullptr, 1e6).empty());
+  EXPECT_EQ(forever.waiting_references(), 1u);
+
+  // A keyframe without neighbours keeps waiting at rest; it is not given up for the time.
+  KeyframeBuffer alone(cfg);
+  alone.add(camera_at({0, 0, 0}), 0.0);
+  std::vector<int64_t> given_up;
+  EXPECT_TRUE(alone.take_ready_references(2.0, &given_up, 100.0).empty());
+  EXPECT_TRUE(given_up.empty());
+  EXPECT_EQ(alone.waiting_references(), 1u);
+
+  for (const double bad_wait : {-1.0, std::nan(""), std::numeric_limits<double>::infinity()}) {
+    KeyframeConfig bad = cfg;
+    bad.max_wait_s = bad_wait;
+    EXPECT_THROW(KeyframeBuffer{bad}, std::invalid_argument) << bad_wait;
+  }
 }
 
 TEST(Keyframes, AKeyframeWithoutNeighboursIsGivenUp) {

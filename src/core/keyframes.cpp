@@ -17,6 +17,7 @@ void KeyframeConfig::validate() const {
   }
   if (num_sources < 1) fail("num_sources must be >= 1, got " + std::to_string(num_sources));
   if (lookahead < 0) fail("lookahead must be >= 0, got " + std::to_string(lookahead));
+  if (!(std::isfinite(max_wait_s) && max_wait_s >= 0)) fail("max_wait_s must be >= 0, got " + std::to_string(max_wait_s));
   // A waiting reference must stay buffered until it is given up.
   if (buffer_size < num_sources + lookahead + 1) {
     fail("buffer_size must be at least num_sources + lookahead + 1 = " + std::to_string(num_sources + lookahead + 1) +
@@ -72,13 +73,17 @@ void KeyframeBuffer::forget_waiting(int64_t id) {
   waiting_.erase(std::remove(waiting_.begin(), waiting_.end(), id), waiting_.end());
 }
 
-std::vector<ReferenceSources> KeyframeBuffer::take_ready_references(double depth, std::vector<int64_t>* given_up) {
+std::vector<ReferenceSources> KeyframeBuffer::take_ready_references(double depth, std::vector<int64_t>* given_up,
+                                                                    std::optional<double> now) {
   std::vector<ReferenceSources> ready;
   const int64_t newest = next_id_ - 1;
   for (auto it = waiting_.begin(); it != waiting_.end();) {
     const int64_t id = *it;
     const int64_t newer = newest - id;  // ids are consecutive
-    if (newer < config_.lookahead) break;  // so are all the later ones
+    if (newer < config_.lookahead && !waited_too_long(id, now)) {
+      ++it;
+      continue;
+    }
     std::vector<KeyframeScore> sources = select_sources(id, depth);
     if (static_cast<int>(sources.size()) >= config_.num_sources) {
       ready.push_back({id, std::move(sources)});
@@ -91,6 +96,12 @@ std::vector<ReferenceSources> KeyframeBuffer::take_ready_references(double depth
     }
   }
   return ready;
+}
+
+bool KeyframeBuffer::waited_too_long(int64_t id, std::optional<double> now) const {
+  if (!now || config_.max_wait_s <= 0) return false;
+  const Keyframe* k = find(id);
+  return k && *now - k->stamp >= config_.max_wait_s;
 }
 
 const Keyframe* KeyframeBuffer::find(int64_t id) const {

@@ -45,6 +45,7 @@ unsup_mvs::KeyframeSelectorConfig to_reconfigure(const umvs::KeyframeStreamConfi
   r.buffer_size = c.keyframes.buffer_size;
   r.num_sources = c.keyframes.num_sources;
   r.lookahead = c.keyframes.lookahead;
+  r.max_wait_s = c.keyframes.max_wait_s;
   r.min_view_score = c.keyframes.min_score;
   r.view_score_grid = c.keyframes.score_grid;
   r.depth_min = c.depth_min;
@@ -59,6 +60,7 @@ umvs::KeyframeStreamConfig with_reconfigure(umvs::KeyframeStreamConfig c, const 
   c.keyframes.buffer_size = r.buffer_size;
   c.keyframes.num_sources = r.num_sources;
   c.keyframes.lookahead = r.lookahead;
+  c.keyframes.max_wait_s = r.max_wait_s;
   c.keyframes.min_score = r.min_view_score;
   c.keyframes.score_grid = r.view_score_grid;
   c.depth_min = r.depth_min;
@@ -138,10 +140,10 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
         [this](const unsup_mvs::KeyframeSelectorConfig& r) { onReconfigure(r); });
     const auto& c = stream_.keyframes;
     NODELET_INFO("keyframe_selector: %s + %s in '%s' (%s sync), keyframe after %.2f m / %.1f deg / pose distance %.2f, "
-                 "buffer %d, %d neighbours (lookahead %d keyframes), depth %.2f-%.2f m%s",
+                 "buffer %d, %d neighbours (lookahead %d keyframes, at most %.1f s), depth %.2f-%.2f m%s",
                  image_topic_.c_str(), info_sub_.getTopic().c_str(), world_frame_.c_str(),
                  approximate_sync ? "approximate" : "exact", c.min_translation, c.min_rotation_deg, c.min_pose_distance,
-                 c.buffer_size, c.num_sources, c.lookahead, stream_.depth_min, stream_.depth_max,
+                 c.buffer_size, c.num_sources, c.lookahead, c.max_wait_s, stream_.depth_min, stream_.depth_max,
                  depth_from_estimates_ ? " (then from depth estimates)" : "");
   }
 
@@ -249,17 +251,21 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
       return;
     }
     ++frames_;
-    if (!buffer_->is_keyframe(camera)) return;
-
-    int64_t evicted = -1;
-    const umvs::Keyframe& ref = buffer_->add(camera, image->header.stamp.toSec(), &evicted);
-    frames_by_id_[ref.id] = {image, info, pose};
-    if (evicted >= 0) frames_by_id_.erase(evicted);
-    publishPoses(image->header.stamp);
-
+    const double stamp = image->header.stamp.toSec();
+    if (buffer_->is_keyframe(camera)) {
+      int64_t evicted = -1;
+      const umvs::Keyframe& ref = buffer_->add(camera, stamp, &evicted);
+      frames_by_id_[ref.id] = {image, info, pose};
+      if (evicted >= 0) frames_by_id_.erase(evicted);
+      publishPoses(image->header.stamp);
+    } else if (buffer_->waiting_references() == 0) {
+      return;
+    }
+    // Every frame's stamp is the clock by which a keyframe stops waiting for its lookahead
+    // (max_wait_s): a robot that stands still gets the depth of where it stands.
     const umvs::DepthRange range = depth_range_->range();
     std::vector<int64_t> given_up;
-    for (const auto& ready : buffer_->take_ready_references(0.5 * (range.near + range.far), &given_up)) {
+    for (const auto& ready : buffer_->take_ready_references(0.5 * (range.near + range.far), &given_up, stamp)) {
       publishSet(ready, range.near, range.far);
     }
     for (const int64_t id : given_up) {

@@ -28,6 +28,7 @@ umvs::KeyframeConfig keyframe_config_from_ros(const ros::NodeHandle& nh) {
   nh.param("buffer_size", c.buffer_size, c.buffer_size);
   nh.param("num_sources", c.num_sources, c.num_sources);
   nh.param("lookahead", c.lookahead, c.lookahead);
+  nh.param("max_wait_s", c.max_wait_s, c.max_wait_s);
   nh.param("min_view_score", c.min_score, c.min_score);
   nh.param("view_score_grid", c.score_grid, c.score_grid);
   c.validate();

@@ -199,6 +199,7 @@ TEST(KeyframeSelectorReconfigureTest, StartsWithTheLaunchValuesAndChecksRequests
   EXPECT_DOUBLE_EQ(double_of(c, "min_rotation_deg"), 10.0);
   EXPECT_EQ(int_of(c, "buffer_size"), 20);
   EXPECT_EQ(int_of(c, "num_sources"), 2);
+  EXPECT_DOUBLE_EQ(double_of(c, "max_wait_s"), 2.0);
   EXPECT_DOUBLE_EQ(double_of(c, "depth_min"), 1.0);
   EXPECT_DOUBLE_EQ(double_of(c, "depth_max"), 4.0);
 

@@ -1,7 +1,7 @@
 // rostest for keyframe_selector: a camera moving along x (tf2 + Image + CameraInfo) gives
 // KeyframeSets with the right stamps, frames, neighbours and depth range; bad input (unsupported
 // encoding, missing transform, NaN pose, distorted calibration) is logged and skipped, and the
-// node keeps working. With ~compressed (keyframe_selector_compressed.test) the images go as png
+// node keeps working; a camera that stops still gets the set of its last keyframe. With ~compressed (keyframe_selector_compressed.test) the images go as png
 // sensor_msgs/CompressedImage on /cam/image/compressed to a selector with image_transport:=compressed.
 #include <sensor_msgs/CompressedImage.h>
 #include <tf2_msgs/TFMessage.h>
@@ -173,6 +173,36 @@ TEST_F(KeyframeSelectorTest, BadInputIsLoggedAndSkipped) {
   for (int i = 0; i < 4; ++i) sendFrame(umvs_test::make_pose({5.0 + 0.15 * i, 0, 0}));
   ASSERT_TRUE(wait_for([&] { return !sets_.empty() && std::abs(sets_.back()->reference_pose.position.x - 5.3) < 1e-9; },
                        10.0)) << log.all();
+}
+
+TEST_F(KeyframeSelectorTest, ACameraThatStopsGetsTheSetOfWhereItStands) {
+  // Far from the earlier tests' keyframes: four keyframes 0.2 m apart, then the camera stands
+  // still and keeps sending frames. The last keyframe has no newer one to wait for (lookahead 1);
+  // the frames' stamps release it max_wait_s (2 s, the default) after it was taken, with the
+  // keyframes before it as neighbours.
+  for (int i = 0; i < 4; ++i) sendFrame(umvs_test::make_pose({20.0 + 0.2 * i, 0, 0}));
+  const ros::Time last_keyframe = stamps_.back();
+  auto last_sent = [&] {
+    for (const auto& s : sets_) {
+      if (std::abs(s->reference_pose.position.x - 20.6) < 1e-9) return s;
+    }
+    return unsup_mvs::KeyframeSetConstPtr();
+  };
+  ASSERT_TRUE(wait_for([&] { return !sets_.empty() && std::abs(sets_.back()->reference_pose.position.x - 20.4) < 1e-9; },
+                       10.0)) << "the keyframe before the last one goes out when the last one comes";
+  // Frames stamped less than 2 s after the last keyframe cannot release it.
+  while ((ros::Time::now() - last_keyframe).toSec() < 1.5) sendFrame(umvs_test::make_pose({20.6, 0, 0}));
+  EXPECT_FALSE(last_sent()) << "sent before max_wait_s";
+  while ((ros::Time::now() - last_keyframe).toSec() < 2.1) sendFrame(umvs_test::make_pose({20.6, 0, 0}));
+  ASSERT_TRUE(wait_for([&] { return last_sent() != nullptr; }, 10.0)) << "the camera stopped and got no depth";
+  const auto& set = *last_sent();
+  EXPECT_EQ(set.header.stamp, last_keyframe);
+  ASSERT_EQ(set.source_ids.size(), 2u);
+  for (size_t j = 0; j < 2; ++j) {
+    EXPECT_LT(set.source_ids[j], set.reference_id);
+    EXPECT_GE(set.source_poses[j].position.x, 20.0 - 1e-9);
+    EXPECT_LT(set.source_poses[j].position.x, 20.6 - 1e-9);
+  }
 }
 
 }  // namespace

@@ -16,10 +16,14 @@
 //    from the keyframes after them. With the default, 1, the demo's fused rooms scored 4-6 F-score
 //    points more than with the earlier policy (past neighbours only, the first keyframes
 //    dropped; docs/results.md).
+//  * A keyframe waits for its lookahead at most max_wait_s, measured by the stamps of the frames
+//    that keep coming: a robot that stops still gets the depth of where it stands, from the
+//    neighbours it has.
 #pragma once
 
 #include <cstdint>
 #include <deque>
+#include <optional>
 #include <vector>
 
 #include "unsup_mvs/core/camera.h"
@@ -34,6 +38,7 @@ struct KeyframeConfig {
   int buffer_size = 30;            // keyframes kept for neighbour selection
   int num_sources = 2;             // neighbours per reference
   int lookahead = 1;               // newer keyframes a reference waits for (latency in keyframes)
+  double max_wait_s = 2.0;         // ... but no longer than this (stamps; 0 = as long as it takes)
   double min_score = 0.5;          // a neighbour needs at least this view-selection score
   int score_grid = 16;             // points per side sampled in the reference frustum
   ViewScoreConfig score;
@@ -91,10 +96,12 @@ class KeyframeBuffer {
   const Keyframe& add(const Camera& camera, double stamp, int64_t* evicted = nullptr);
 
   // The references that became ready (oldest first) and leave the waiting list: each waiting
-  // keyframe with at least `lookahead` newer keyframes and num_sources neighbours scoring
-  // >= min_score on points sampled at `depth`. Waiting keyframes that got none after
-  // lookahead + num_sources newer keyframes are given up; their ids go to *given_up.
-  std::vector<ReferenceSources> take_ready_references(double depth, std::vector<int64_t>* given_up = nullptr);
+  // keyframe with at least `lookahead` newer keyframes (or, given `now`, the stamp of the newest
+  // frame, one at least max_wait_s older than it) and num_sources neighbours scoring >= min_score
+  // on points sampled at `depth`. Waiting keyframes that got none after lookahead + num_sources
+  // newer keyframes are given up; their ids go to *given_up.
+  std::vector<ReferenceSources> take_ready_references(double depth, std::vector<int64_t>* given_up = nullptr,
+                                                      std::optional<double> now = std::nullopt);
   size_t waiting_references() const { return waiting_.size(); }
 
   // The best `num_sources` buffered keyframes for `reference_id` (best first), scored on points
@@ -114,6 +121,8 @@ class KeyframeBuffer {
 
  private:
   void forget_waiting(int64_t id);
+  // Whether keyframe `id` has waited max_wait_s or longer for its lookahead by `now`.
+  bool waited_too_long(int64_t id, std::optional<double> now) const;
 
   KeyframeConfig config_;
   std::deque<Keyframe> keyframes_;
