@@ -5,8 +5,9 @@
 #      (`umvs bag`: Image + CameraInfo + /tf),
 #   3. replays the bag through the ROS pipeline (replay.launch: keyframe selector -> inference with
 #      the default model models/unsup_mvsnet.pt -> fusion) with RViz on a virtual display,
-#   4. saves the fused cloud (fusion's save_cloud service), takes an RViz screenshot, and prints
-#      `umvs eval cloud` against the scene's ground-truth surface.
+#   4. at the end of the log sends the last keyframe too (keyframe_selector's flush service,
+#      scripts/flush_replay.py), saves the fused cloud (fusion's save_cloud service), takes an
+#      RViz screenshot, and prints `umvs eval cloud` against the scene's ground-truth surface.
 # Usage: scripts/demo.sh [WORK_DIR]      (default /tmp/umvs_demo; it is replaced)
 # Environment: DEMO_SCENE (room), DEMO_SEED (7), DEMO_VIEWS (24), DEMO_WIDTH x DEMO_HEIGHT (640 x 512,
 #              the default model's training size; images and inference), DEMO_PLANES (128),
@@ -74,8 +75,10 @@ until player_done; do
   fi
   sleep 1
 done
-sleep 8  # the last keyframe set through inference and fusion
-say "bag done; saving the fused cloud"
+sleep 8  # the last keyframe sets through inference and fusion
+say "bag done; the keyframe still waiting for a newer one goes out too (keyframe_selector/flush)"
+python3 scripts/flush_replay.py /unsup_mvs 120
+say "saving the fused cloud"
 rosservice call /unsup_mvs/fusion/save_cloud "path: '$WORK/cloud.ply'"
 # The nodes' last words (rosout.log: "stamp LEVEL node [file] [topics: ...] message").
 grep -E "inference: keyframe|fusion: depth estimate" "$WORK/ros/log/latest/rosout.log" 2>/dev/null | tail -2 |

@@ -255,6 +255,25 @@ TEST(Keyframes, AKeyframeWaitsForItsLookaheadAtMostMaxWait) {
   }
 }
 
+TEST(Keyframes, AtTheEndOfAStreamWaitingKeyframesWithNeighboursAreTaken) {
+  // A log that ends: no frame comes to release the newest keyframe. take_waiting_references
+  // sends it with the neighbours it has, even with max_wait_s 0; one without neighbours stays.
+  KeyframeConfig cfg;
+  cfg.max_wait_s = 0;
+  KeyframeBuffer buffer(cfg);
+  std::vector<Camera> cameras = sideways_drive(5, 0.15);
+  cameras[3] = camera_at({0.45, 0, 0}, 180);  // looks the other way: nobody shares its view
+  references_while_adding(buffer, cameras);
+  ASSERT_EQ(buffer.waiting_references(), 2u) << "keyframe 3 (no neighbours) and 4 (its lookahead)";
+  const auto last = buffer.take_waiting_references(2.0);
+  ASSERT_EQ(last.size(), 1u);
+  EXPECT_EQ(last[0].reference_id, 4);
+  ASSERT_EQ(last[0].sources.size(), 2u);
+  for (const auto& n : last[0].sources) EXPECT_LT(n.id, 3);
+  EXPECT_EQ(buffer.waiting_references(), 1u);
+  EXPECT_TRUE(buffer.take_waiting_references(2.0).empty());
+}
+
 TEST(Keyframes, AKeyframeWithoutNeighboursIsGivenUp) {
   // The fourth keyframe looks the other way: nobody shares its view, so after num_sources newer
   // keyframes it stops waiting; the others still become references.

@@ -75,12 +75,23 @@ void KeyframeBuffer::forget_waiting(int64_t id) {
 
 std::vector<ReferenceSources> KeyframeBuffer::take_ready_references(double depth, std::vector<int64_t>* given_up,
                                                                     std::optional<double> now) {
+  return take_references(depth, given_up, [&](int64_t id, int64_t newer) {
+    return newer >= config_.lookahead || waited_too_long(id, now);
+  });
+}
+
+std::vector<ReferenceSources> KeyframeBuffer::take_waiting_references(double depth) {
+  return take_references(depth, nullptr, [](int64_t, int64_t) { return true; });
+}
+
+std::vector<ReferenceSources> KeyframeBuffer::take_references(double depth, std::vector<int64_t>* given_up,
+                                                              const std::function<bool(int64_t, int64_t)>& due) {
   std::vector<ReferenceSources> ready;
   const int64_t newest = next_id_ - 1;
   for (auto it = waiting_.begin(); it != waiting_.end();) {
     const int64_t id = *it;
     const int64_t newer = newest - id;  // ids are consecutive
-    if (newer < config_.lookahead && !waited_too_long(id, now)) {
+    if (!due(id, newer)) {
       ++it;
       continue;
     }

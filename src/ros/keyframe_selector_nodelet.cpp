@@ -14,6 +14,7 @@
 #include <ros/ros.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
+#include <std_srvs/Trigger.h>
 #include <tf2_ros/buffer.h>
 #include <tf2_ros/transform_listener.h>
 
@@ -118,6 +119,7 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
     // for them towards subscribers in other processes.
     keyframes_pub_ = nh.advertise<unsup_mvs::KeyframeSet>("keyframes", kSetQueue);
     poses_pub_ = nh.advertise<geometry_msgs::PoseArray>("keyframe_poses", 1, true);
+    flush_srv_ = pnh.advertiseService("flush", &KeyframeSelectorNodelet::onFlush, this);
     if (depth_from_estimates_) estimate_sub_ = nh.subscribe("depth_estimate", 1, &KeyframeSelectorNodelet::onEstimate, this);
 
     info_sub_.subscribe(nh, "camera_info", queue_size);
@@ -274,6 +276,20 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
     }
   }
 
+  // The end of a log (no frame comes any more to release the newest keyframe): the keyframes
+  // still waiting for their lookahead go out with the neighbours they have.
+  bool onFlush(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    const umvs::DepthRange range = depth_range_->range();
+    const auto ready = buffer_->take_waiting_references(0.5 * (range.near + range.far));
+    for (const auto& r : ready) publishSet(r, range.near, range.far);
+    res.success = true;
+    res.message = "sent " + std::to_string(ready.size()) + " keyframe set(s); " +
+                  std::to_string(buffer_->waiting_references()) + " keyframe(s) still wait for neighbours";
+    NODELET_INFO("keyframe_selector: flush: %s", res.message.c_str());
+    return true;
+  }
+
   void publishSet(const umvs::ReferenceSources& ready, double near, double far) {
     const StoredFrame& ref = frames_by_id_.at(ready.reference_id);
     unsup_mvs::KeyframeSet set;
@@ -351,6 +367,7 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
   std::unique_ptr<message_filters::Synchronizer<ExactPolicy>> exact_sync_;
   std::unique_ptr<message_filters::Synchronizer<ApproxPolicy>> approx_sync_;
   ros::Publisher keyframes_pub_, poses_pub_;
+  ros::ServiceServer flush_srv_;
   ros::Subscriber estimate_sub_;
   std::unique_ptr<ReconfigureServer<unsup_mvs::KeyframeSelectorConfig>> reconfigure_;
 };

@@ -1,9 +1,12 @@
 // rostest for keyframe_selector: a camera moving along x (tf2 + Image + CameraInfo) gives
 // KeyframeSets with the right stamps, frames, neighbours and depth range; bad input (unsupported
 // encoding, missing transform, NaN pose, distorted calibration) is logged and skipped, and the
-// node keeps working; a camera that stops still gets the set of its last keyframe. With ~compressed (keyframe_selector_compressed.test) the images go as png
-// sensor_msgs/CompressedImage on /cam/image/compressed to a selector with image_transport:=compressed.
+// node keeps working; a camera that stops still gets the set of its last keyframe, and so does a
+// log that ends (~flush). With ~compressed (keyframe_selector_compressed.test) the images go as
+// png sensor_msgs/CompressedImage on /cam/image/compressed to a selector with
+// image_transport:=compressed.
 #include <sensor_msgs/CompressedImage.h>
+#include <std_srvs/Trigger.h>
 #include <tf2_msgs/TFMessage.h>
 
 #include <opencv2/imgcodecs.hpp>
@@ -203,6 +206,30 @@ TEST_F(KeyframeSelectorTest, ACameraThatStopsGetsTheSetOfWhereItStands) {
     EXPECT_GE(set.source_poses[j].position.x, 20.0 - 1e-9);
     EXPECT_LT(set.source_poses[j].position.x, 20.6 - 1e-9);
   }
+}
+
+TEST_F(KeyframeSelectorTest, AtTheEndOfALogFlushSendsTheLastKeyframe) {
+  // Three keyframes 0.2 m apart and no frame after them: the last one waits for a newer keyframe
+  // (lookahead 1) until ~flush sends it with the neighbours before it.
+  for (int i = 0; i < 3; ++i) sendFrame(umvs_test::make_pose({30.0 + 0.2 * i, 0, 0}));
+  auto sent_at = [&](double x) {
+    for (const auto& s : sets_) {
+      if (std::abs(s->reference_pose.position.x - x) < 1e-9) return s;
+    }
+    return unsup_mvs::KeyframeSetConstPtr();
+  };
+  ASSERT_TRUE(wait_for([&] { return sent_at(30.2) != nullptr; }, 10.0)) << "the keyframes before the last one";
+  EXPECT_FALSE(sent_at(30.4));
+  std_srvs::Trigger flush;
+  ASSERT_TRUE(ros::service::call("/keyframe_selector/flush", flush));
+  EXPECT_TRUE(flush.response.success);
+  EXPECT_EQ(flush.response.message, "sent 1 keyframe set(s); 0 keyframe(s) still wait for neighbours");
+  ASSERT_TRUE(wait_for([&] { return sent_at(30.4) != nullptr; }, 10.0));
+  EXPECT_EQ(sent_at(30.4)->header.stamp, stamps_.back());
+  for (const uint32_t id : sent_at(30.4)->source_ids) EXPECT_LT(id, sent_at(30.4)->reference_id);
+  // Nothing waits any more.
+  ASSERT_TRUE(ros::service::call("/keyframe_selector/flush", flush));
+  EXPECT_EQ(flush.response.message, "sent 0 keyframe set(s); 0 keyframe(s) still wait for neighbours");
 }
 
 }  // namespace

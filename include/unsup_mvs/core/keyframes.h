@@ -23,6 +23,7 @@
 
 #include <cstdint>
 #include <deque>
+#include <functional>
 #include <optional>
 #include <vector>
 
@@ -102,6 +103,9 @@ class KeyframeBuffer {
   // newer keyframes are given up; their ids go to *given_up.
   std::vector<ReferenceSources> take_ready_references(double depth, std::vector<int64_t>* given_up = nullptr,
                                                       std::optional<double> now = std::nullopt);
+  // The end of a stream (a log that ended): every waiting keyframe that has num_sources
+  // neighbours now is a reference, without waiting for its lookahead; the others keep waiting.
+  std::vector<ReferenceSources> take_waiting_references(double depth);
   size_t waiting_references() const { return waiting_.size(); }
 
   // The best `num_sources` buffered keyframes for `reference_id` (best first), scored on points
@@ -123,6 +127,10 @@ class KeyframeBuffer {
   void forget_waiting(int64_t id);
   // Whether keyframe `id` has waited max_wait_s or longer for its lookahead by `now`.
   bool waited_too_long(int64_t id, std::optional<double> now) const;
+  // Takes the waiting keyframes for which `due(id, newer keyframes)` holds and that have their
+  // neighbours; gives up those that still have none after lookahead + num_sources newer ones.
+  std::vector<ReferenceSources> take_references(double depth, std::vector<int64_t>* given_up,
+                                                const std::function<bool(int64_t, int64_t)>& due);
 
   KeyframeConfig config_;
   std::deque<Keyframe> keyframes_;
