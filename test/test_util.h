@@ -8,6 +8,8 @@
 #include <filesystem>
 #include <string>
 
+#include "scratch_dirs.h"
+
 namespace umvs::test {
 
 // ../shared/data beside the repository (or $UMVS_SHARED_DATA); "" when absent.
@@ -18,12 +20,7 @@ inline std::string shared_data_dir() {
 }
 
 // A fresh, empty temporary folder for one test.
-inline std::string temp_dir(const std::string& name) {
-  const auto p = std::filesystem::temp_directory_path() / ("umvs_test_" + name + "_" + std::to_string(::getpid()));
-  std::filesystem::remove_all(p);
-  std::filesystem::create_directories(p);
-  return p.string();
-}
+inline std::string temp_dir(const std::string& name) { return umvs_scratch::scratch_dir("umvs_test_", name); }
 
 inline std::string umvs_binary() { return std::string(UMVS_BIN_DIR) + "/umvs"; }
 

@@ -17,6 +17,8 @@
 #include <mutex>
 #include <string>
 
+#include "../scratch_dirs.h"
+
 namespace umvs_test {
 
 // Spins until `done` or `timeout` seconds of wall time passed. Returns `done()`.
@@ -83,12 +85,8 @@ bool publish_until_logged(ros::Publisher& pub, const Msg& msg, RosoutCapture& lo
 // Folder of this executable (devel/lib/unsup_mvs), where the `umvs` tool is too.
 inline std::string bin_dir() { return std::filesystem::read_symlink("/proc/self/exe").parent_path().string(); }
 
-inline std::string temp_dir(const std::string& name) {
-  const auto p = std::filesystem::temp_directory_path() / ("umvs_rostest_" + name + "_" + std::to_string(::getpid()));
-  std::filesystem::remove_all(p);
-  std::filesystem::create_directories(p);
-  return p.string();
-}
+// A fresh, empty temporary folder, removed when the test process exits (../scratch_dirs.h).
+inline std::string temp_dir(const std::string& name) { return umvs_scratch::scratch_dir("umvs_rostest_", name); }
 
 // An undistorted camera_info of width x height with focal length f and the principal point in the middle.
 inline sensor_msgs::CameraInfo make_info(int width, int height, double f, const std_msgs::Header& header) {
