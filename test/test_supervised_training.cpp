@@ -368,7 +368,7 @@ TEST(SelfTraining, UmvsTrainReadsNoGroundTruth) {
   const std::string out_a = test::temp_dir("self_train_run_a"), out_b = test::temp_dir("self_train_run_b");
   std::filesystem::remove_all(out_a);
   std::filesystem::remove_all(out_b);
-  const std::string log_a = out_a + ".log";
+  const std::string log_a = test::temp_dir("self_train_logs") + "/run_a.log";
   ASSERT_EQ(std::system((test::umvs_binary() + " train --data " + with_gt + " --out " + out_a + common + " > " +
                          log_a + " 2>&1").c_str()),
             0)
