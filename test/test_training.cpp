@@ -15,6 +15,7 @@
 #include "unsup_mvs/io/checkpoint.h"
 #include "unsup_mvs/io/image_io.h"
 #include "unsup_mvs/io/loss_curve.h"
+#include "unsup_mvs/io/mvs_folder.h"
 #include "unsup_mvs/io/synth_writer.h"
 #include "unsup_mvs/io/training_data.h"
 #include "unsup_mvs/io/training_run.h"
@@ -84,6 +85,35 @@ TEST(TrainingData, CroppedTuplesKeepGeometryConsistent) {
   bad = cfg;
   bad.width = 100;
   EXPECT_THROW(MvsFolderSource({dir}, bad), std::invalid_argument);
+}
+
+TEST(TrainingData, SkippedViewsAreCountedWithTheNeighboursTheyLack) {
+  // A folder where one view has four neighbours and the others two: --views-loss 4 keeps one tuple,
+  // and the description says how many were dropped and why.
+  const std::string dir = write_scene("skipped", 64, 64, 6);
+  auto pairs = read_pair_file(dir + "/pair.txt");
+  ASSERT_EQ(pairs.size(), 6u);
+  for (size_t i = 0; i < pairs.size(); ++i) {
+    ASSERT_GE(pairs[i].sources.size(), 4u);
+    const size_t keep = i == 0 ? 4 : 2;
+    pairs[i].sources.resize(keep);
+    pairs[i].scores.resize(keep);
+  }
+  write_pair_file(dir + "/pair.txt", pairs);
+  TupleConfig cfg;
+  cfg.views_in = 3;
+  cfg.views_loss = 4;
+  cfg.width = 64;
+  cfg.height = 64;
+  MvsFolderSource source({dir}, cfg);
+  EXPECT_EQ(source.size(), 1u);
+  EXPECT_NE(source.description().find("1 tuples from 1 folder(s) (5 views skipped: fewer than the 4 neighbours in "
+                                      "pair.txt that --views-in 3 and --views-loss 4 need)"),
+            std::string::npos)
+      << source.description();
+  cfg.views_loss = 2;
+  EXPECT_EQ(MvsFolderSource({dir}, cfg).size(), 6u);
+  EXPECT_EQ(MvsFolderSource({dir}, cfg).description().find("skipped"), std::string::npos);
 }
 
 TEST(Training, ABrokenBatchLeavesTheModelUntouched) {

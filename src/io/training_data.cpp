@@ -95,7 +95,12 @@ MvsFolderSource::MvsFolderSource(const std::vector<std::string>& roots, TupleCon
 std::string MvsFolderSource::description() const {
   std::ostringstream s;
   s << entries_.size() << " tuples from " << folders_.size() << " folder(s)";
-  if (skipped_ > 0) s << " (" << skipped_ << " views with too few neighbours skipped)";
+  if (skipped_ > 0) {
+    // Named with what they lack: a --views-loss one too high silently drops most of a small folder.
+    s << " (" << skipped_ << " views skipped: fewer than the " << std::max(config_.views_in - 1, config_.views_loss)
+      << " neighbours in pair.txt that --views-in " << config_.views_in << " and --views-loss " << config_.views_loss
+      << " need)";
+  }
   s << (config_.supervised ? ", supervised on ground-truth depth"
                            : has_gt_ ? ", with ground-truth depth (for scoring only)" : ", no ground truth");
   return s.str();

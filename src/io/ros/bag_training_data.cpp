@@ -1,5 +1,6 @@
 #include "unsup_mvs/io/ros/bag_training_data.h"
 
+#include <algorithm>
 #include <cmath>
 #include <ostream>
 #include <sstream>
@@ -117,7 +118,11 @@ std::string BagSource::description() const {
   std::ostringstream s;
   s << entries_.size() << (split_ == BagSplit::kHeldOut ? " held-out" : split_ == BagSplit::kTraining ? " training" : "")
     << " keyframe tuples from " << keyframes_->size() << " keyframes";
-  if (skipped_ > 0) s << " (" << skipped_ << " with too few neighbours skipped)";
+  if (skipped_ > 0) {
+    s << " (" << skipped_ << " skipped: fewer than the "
+      << std::max(tuple_config_.views_in - 1, tuple_config_.views_loss) << " neighbours that --views-in "
+      << tuple_config_.views_in << " and --views-loss " << tuple_config_.views_loss << " need)";
+  }
   size_t with_gt = 0;
   for (const auto& e : entries_) with_gt += (*keyframes_)[e.ref].image.depth.defined();
   s << ", depth " << config_.depth_min << "-" << config_.depth_max << " m, ";
