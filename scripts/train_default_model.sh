@@ -32,6 +32,8 @@
 #   3. GPU:  DEVICE=cuda WIDTH=640 HEIGHT=512 NUM_DEPTH=128 RENDER_WIDTH=640 RENDER_HEIGHT=512
 #            SUPERVISED_SHARE=0.5 LR=5e-4 LR_SCHEDULE=cosine STEPS=2629 MAX_MINUTES=5.27 INIT=<2>
 #            (stopped by time at step 2,357), weights exported with --steps 0.
+# On a GPU machine without apt, build UMVS with scripts/build_portable.sh and pass the textures of
+# scripts/portable_deps.sh --textures (README, "Building").
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
