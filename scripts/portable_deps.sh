@@ -15,6 +15,11 @@ cd "$(dirname "$0")/.."
 WITH_TEXTURES=0
 if [ "${1:-}" = --textures ]; then WITH_TEXTURES=1; shift; fi
 DIR="${1:-.portable_deps}"
+MARK=.umvs_portable_deps  # only a folder this script made is ever replaced
+if [ -e "$DIR" ] && [ ! -f "$DIR/$MARK" ]; then
+  echo "portable_deps: $DIR exists and is not a bundle of this script: name a new folder" >&2
+  exit 1
+fi
 bash scripts/install_deps.sh >/dev/null
 if ((WITH_TEXTURES)); then bash scripts/install_textures.sh >/dev/null; fi
 
@@ -40,6 +45,7 @@ if ((WITH_TEXTURES)); then
   cp -rL /usr/share/backgrounds/mate/nature "$tmp/textures/mate-nature"
   cp -rL /usr/local/share/unsup_mvs/textures/scikit-image "$tmp/textures/scikit-image"
 fi
+touch "$tmp/$MARK"
 rm -rf "$DIR"
 mv "$tmp" "$DIR"
 trap - EXIT
