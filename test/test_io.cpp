@@ -246,7 +246,7 @@ TEST(Checkpoint, RoundTripAndMismatchIsNamed) {
     std::ifstream in(dir + "/exact.pt", std::ios::binary);
     const std::vector<char> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
     auto root = torch::pickle_load(bytes).toGenericDict();
-    root.at("config").toGenericDict().erase("feature_warp");
+    ASSERT_EQ(root.at("config").toGenericDict().erase("feature_warp"), 1u);
     const std::vector<char> old = torch::pickle_save(c10::IValue(root));
     std::ofstream(dir + "/old.pt", std::ios::binary).write(old.data(), static_cast<std::streamsize>(old.size()));
   }
@@ -266,7 +266,7 @@ TEST(Checkpoint, StateDictErrorsNameTheTensors) {
   c10::impl::GenericDict d(c10::StringType::get(), c10::AnyType::get());
   for (const auto& p : net->named_parameters()) d.insert(p.key(), p.value().detach().clone());
   for (const auto& b : net->named_buffers()) d.insert(b.key(), b.value().detach().clone());
-  d.erase("feature.conv0.bn.weight");
+  ASSERT_EQ(d.erase("feature.conv0.bn.weight"), 1u);
   d.insert_or_assign("feature.feature.bias", torch::zeros({31}));
   d.insert("extra.weight", torch::zeros({1}));
   EXPECT_THAT([&] { load_state_dict(*net, d, "weights.pt"); },
