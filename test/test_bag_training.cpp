@@ -248,6 +248,33 @@ TEST(BagTraining, TheBestSourceSeesTheReferenceCentre) {
   }
 }
 
+TEST(BagTraining, SkippedKeyframesAreCountedWithTheNeighboursTheyLack) {
+  // The room's last two keyframes as a second bag: each has one keyframe of its own bag, fewer than
+  // the two neighbours needed, so exactly those two are skipped; the rest keep enough.
+  const auto& room = logged_room();
+  auto config = room_config();
+  config.holdout_every = 0;
+  auto keyframes = umvs::read_bag_keyframes({room.bag}, config);
+  ASSERT_GE(keyframes.size(), 8u);
+  keyframes[keyframes.size() - 1].bag = 1;
+  keyframes[keyframes.size() - 2].bag = 1;
+  auto tuples = small_tuples();
+  tuples.views_loss = 2;
+  const umvs::BagSource all(std::make_shared<const std::vector<umvs::BagKeyframe>>(keyframes), umvs::BagSplit::kAll,
+                            config, tuples);
+  EXPECT_EQ(all.size(), keyframes.size() - 2);
+  EXPECT_NE(all.description().find(" keyframe tuples from " + std::to_string(keyframes.size()) +
+                                   " keyframes (2 skipped: fewer than the 2 neighbours that --views-in 3 and "
+                                   "--views-loss 2 need)"),
+            std::string::npos)
+      << all.description();
+  tuples.views_in = 2;  // one neighbour is enough for the last two
+  tuples.views_loss = 1;
+  const umvs::BagSource none_skipped(std::make_shared<const std::vector<umvs::BagKeyframe>>(keyframes),
+                                     umvs::BagSplit::kAll, config, tuples);
+  EXPECT_EQ(none_skipped.description().find("skipped"), std::string::npos) << none_skipped.description();
+}
+
 TEST(BagTraining, UnusableInputIsRefusedWithTheReason) {
   const auto& room = logged_room();
   auto config = room_config();

@@ -30,6 +30,11 @@ void TupleConfig::validate() const {
   }
 }
 
+std::string TupleConfig::neighbours_needed_phrase(const std::string& where) const {
+  return "the " + std::to_string(neighbours_needed()) + " neighbours" + where + " that --views-in " +
+         std::to_string(views_in) + " and --views-loss " + std::to_string(views_loss) + " need";
+}
+
 namespace {
 
 double uniform(std::mt19937_64& rng, double lo, double hi) {
@@ -67,7 +72,7 @@ MvsFolderSource::MvsFolderSource(const std::vector<std::string>& roots, TupleCon
     : config_(std::move(config)) {
   config_.validate();
   if (roots.empty()) throw std::invalid_argument("no training data folder given");
-  const int needed = std::max(config_.views_in - 1, config_.views_loss);
+  const int needed = config_.neighbours_needed();
   for (const auto& root : roots) {
     folders_.emplace_back(root);
     size_t usable = 0;
@@ -86,8 +91,7 @@ MvsFolderSource::MvsFolderSource(const std::vector<std::string>& roots, TupleCon
       ++usable;
     }
     if (usable == 0) {
-      throw std::runtime_error(root + ": no view has the " + std::to_string(needed) +
-                               " neighbours in pair.txt that --views-in/--views-loss need");
+      throw std::runtime_error(root + ": no view has " + config_.neighbours_needed_phrase(" in pair.txt"));
     }
   }
 }
@@ -97,9 +101,7 @@ std::string MvsFolderSource::description() const {
   s << entries_.size() << " tuples from " << folders_.size() << " folder(s)";
   if (skipped_ > 0) {
     // Named with what they lack: a --views-loss one too high silently drops most of a small folder.
-    s << " (" << skipped_ << " views skipped: fewer than the " << std::max(config_.views_in - 1, config_.views_loss)
-      << " neighbours in pair.txt that --views-in " << config_.views_in << " and --views-loss " << config_.views_loss
-      << " need)";
+    s << " (" << skipped_ << " views skipped: fewer than " << config_.neighbours_needed_phrase(" in pair.txt") << ")";
   }
   s << (config_.supervised ? ", supervised on ground-truth depth"
                            : has_gt_ ? ", with ground-truth depth (for scoring only)" : ", no ground truth");
@@ -109,7 +111,7 @@ std::string MvsFolderSource::description() const {
 TrainingTuple make_training_tuple(std::string name, const ViewInput& ref, const std::vector<ViewInput>& sources,
                                   double depth_min, double depth_max, const torch::Tensor& depth_gt,
                                   const TupleConfig& config, std::mt19937_64* rng) {
-  const size_t needed = static_cast<size_t>(std::max(config.views_in - 1, config.views_loss));
+  const size_t needed = static_cast<size_t>(config.neighbours_needed());
   if (sources.size() < needed) {
     throw std::invalid_argument(name + ": " + std::to_string(sources.size()) + " source views, " +
                                 std::to_string(needed) + " needed");

@@ -3,6 +3,7 @@
 // only need to implement this interface.
 #pragma once
 
+#include <algorithm>
 #include <memory>
 #include <random>
 #include <string>
@@ -35,6 +36,11 @@ struct TupleConfig {
   // where the folders have ground truth).
   bool read_ground_truth = true;
   void validate() const;  // throws std::invalid_argument naming the field
+  // Neighbours a reference needs: the network's sources and the loss's views are the first of one
+  // ranked list of neighbours.
+  int neighbours_needed() const { return std::max(views_in - 1, views_loss); }
+  // "the 4 neighbours<where> that --views-in 3 and --views-loss 4 need": what a skipped view lacks.
+  std::string neighbours_needed_phrase(const std::string& where) const;
 };
 
 class TupleSource {

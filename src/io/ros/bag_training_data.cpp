@@ -66,7 +66,7 @@ BagSource::BagSource(std::shared_ptr<const std::vector<BagKeyframe>> keyframes, 
   config_.validate();
   tuple_config_.validate();
   const auto& all = *keyframes_;
-  const size_t needed = static_cast<size_t>(std::max(tuple_config_.views_in - 1, tuple_config_.views_loss));
+  const size_t needed = static_cast<size_t>(tuple_config_.neighbours_needed());
   const double score_depth = 0.5 * (config_.depth_min + config_.depth_max);
   for (size_t r = 0; r < all.size(); ++r) {
     const bool wanted = split_ == BagSplit::kAll || (split_ == BagSplit::kHeldOut) == all[r].held_out;
@@ -95,10 +95,10 @@ BagSource::BagSource(std::shared_ptr<const std::vector<BagKeyframe>> keyframes, 
   }
   if (entries_.empty()) {
     throw std::runtime_error("no " + std::string(split_ == BagSplit::kHeldOut ? "held-out " : "") +
-                             "keyframe has the " + std::to_string(needed) +
-                             " neighbours (view-selection score >= " + std::to_string(config_.keyframes.min_score) +
-                             ") that --views-in/--views-loss need: record a longer sequence or lower the keyframe "
-                             "thresholds");
+                             "keyframe has " +
+                             tuple_config_.neighbours_needed_phrase(" (view-selection score >= " +
+                                                                    std::to_string(config_.keyframes.min_score) + ")") +
+                             ": record a longer sequence or lower the keyframe thresholds");
   }
 }
 
@@ -119,9 +119,7 @@ std::string BagSource::description() const {
   s << entries_.size() << (split_ == BagSplit::kHeldOut ? " held-out" : split_ == BagSplit::kTraining ? " training" : "")
     << " keyframe tuples from " << keyframes_->size() << " keyframes";
   if (skipped_ > 0) {
-    s << " (" << skipped_ << " skipped: fewer than the "
-      << std::max(tuple_config_.views_in - 1, tuple_config_.views_loss) << " neighbours that --views-in "
-      << tuple_config_.views_in << " and --views-loss " << tuple_config_.views_loss << " need)";
+    s << " (" << skipped_ << " skipped: fewer than " << tuple_config_.neighbours_needed_phrase("") << ")";
   }
   size_t with_gt = 0;
   for (const auto& e : entries_) with_gt += (*keyframes_)[e.ref].image.depth.defined();
