@@ -17,9 +17,11 @@ if [ -z "${TORCH_PREFIX:-}" ]; then
     { echo "build_portable: python3 has no torch: set TORCH_PREFIX to a LibTorch's cmake folder" >&2; exit 1; }
 fi
 echo "[build_portable] LibTorch from $TORCH_PREFIX, headers from $DEPS"
+mkdir -p "$BUILD_DIR"
+CONFIGURE_LOG="$BUILD_DIR/cmake.log"  # inside the folder: any spelling of BUILD_DIR works (a trailing /)
 cmake -S . -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=Release -DUMVS_WITH_ROS=OFF -DUMVS_WITH_OPENCV=OFF \
   -DUMVS_BUILD_TESTS=OFF -DUMVS_OPENMP="${UMVS_OPENMP:-ON}" \
   -DCMAKE_PREFIX_PATH="$TORCH_PREFIX;$DEPS" -DCMAKE_CXX_FLAGS="-isystem $DEPS/include" \
-  >"$BUILD_DIR.cmake.log" 2>&1 || { cat "$BUILD_DIR.cmake.log"; exit 1; }
+  >"$CONFIGURE_LOG" 2>&1 || { cat "$CONFIGURE_LOG"; exit 1; }
 cmake --build "$BUILD_DIR" -j"${JOBS:-$(nproc)}" --target umvs
 echo "[build_portable] done: $BUILD_DIR/devel/lib/unsup_mvs/umvs"
