@@ -13,9 +13,11 @@
 #include "unsup_mvs/core/synth.h"
 #include "unsup_mvs/core/training.h"
 #include "unsup_mvs/io/checkpoint.h"
+#include "unsup_mvs/io/fine_tune_job.h"
 #include "unsup_mvs/io/image_io.h"
 #include "unsup_mvs/io/loss_curve.h"
 #include "unsup_mvs/io/mvs_folder.h"
+#include "unsup_mvs/io/run_folder.h"
 #include "unsup_mvs/io/synth_writer.h"
 #include "unsup_mvs/io/training_data.h"
 #include "unsup_mvs/io/training_run.h"
@@ -255,6 +257,49 @@ TEST(TrainCommand, ResumeContinuesBitForBitAndKeepsTheBestModel) {
   EXPECT_NE(run(common + " --out " + out + "/a --steps 4 --top-k 5"), 0);
   EXPECT_NE(run(common + " --out " + out + "/d --steps 4 --resume"), 0);
   EXPECT_EQ(load_model(out + "/a/last.pt", torch::kCPU).meta.step, 4);
+}
+
+// `umvs train ARGS`'s line that starts with `prefix` ("" when none).
+std::string train_output_line(const std::string& args, const std::string& prefix) {
+  const std::string log = test::temp_dir("train_stdout") + "/stdout.txt";
+  const std::string cmd = test::umvs_binary() + " train " + args + " > " + log + " 2>/dev/null";
+  if (std::system(cmd.c_str()) != 0) return "";
+  std::ifstream in(log);
+  for (std::string line; std::getline(in, line);)
+    if (line.rfind(prefix, 0) == 0) return line;
+  return "";
+}
+
+TEST(TrainCommand, EvalOnlyAgainstAServedModelGivesTheTrainerNodesVerdict) {
+  const std::string data = write_scene("against", 160, 128, 5, 3);
+  const std::string out = test::temp_dir("against_out");
+  const std::string common =
+      "--data " + data + " --width 160 --height 128 --num-depth 32 --views-loss 3 --top-k 2 --threads 1";
+  ASSERT_EQ(run(common + " --out " + out + "/random --steps 0"), 0);  // random weights
+  const std::string shipped = std::string(UMVS_SOURCE_DIR) + "/models/unsup_mvsnet.pt";
+  const std::string random = out + "/random/last.pt";
+  auto verdict = [&](const std::string& candidate, const std::string& served, const std::string& dir) {
+    return train_output_line(common + " --eval-only " + candidate + " --against " + served + " --out " + out + "/" + dir,
+                             "trainer rule: ");
+  };
+  EXPECT_THAT(verdict(shipped, random, "a"), testing::StartsWith("trainer rule: reload " + shipped + " ("));
+  EXPECT_THAT(verdict(random, shipped, "b"), testing::StartsWith("trainer rule: keep " + shipped + " ("));
+  // The same scores are no evidence.
+  EXPECT_THAT(verdict(shipped, shipped, "c"), testing::StartsWith("trainer rule: keep " + shipped + " ("));
+
+  // eval.csv: the served model's row, then the candidate's, which the trainer node reads.
+  const auto rows = read_csv_rows(out + "/a/eval.csv");
+  ASSERT_EQ(rows.size(), 2u);
+  EXPECT_EQ(eval_row(rows[0]).checkpoint, random);
+  EXPECT_EQ(eval_row(rows[1]).checkpoint, shipped);
+  EvalScores last;
+  ASSERT_TRUE(read_eval_scores(out + "/a/eval.csv", &last));
+  EXPECT_DOUBLE_EQ(last.photometric, *eval_row(rows[1]).photometric);
+  EXPECT_DOUBLE_EQ(last.consistent, *eval_row(rows[1]).consistent);
+
+  // --against means nothing without --eval-only: refused before anything is written.
+  EXPECT_NE(run(common + " --out " + out + "/d --steps 1 --against " + shipped), 0);
+  EXPECT_FALSE(std::filesystem::exists(out + "/d"));
 }
 
 TEST(TrainCommand, MaxMinutesStopsWithACheckpointThatResumes) {

@@ -78,13 +78,17 @@ std::vector<std::string> FineTuneConfig::keyframe_args_overridden() const {
   return overridden;
 }
 
+std::optional<EvalScores> eval_scores(const EvalRow& row) {
+  if (!row.photometric || !row.consistent) return std::nullopt;
+  return EvalScores{*row.photometric, *row.consistent};
+}
+
 bool read_eval_scores(const std::string& eval_csv, EvalScores* scores) {
   CsvRow row;
   if (!read_last_csv_row(eval_csv, &row)) return false;
-  const EvalRow eval = eval_row(row);
-  if (!eval.photometric || !eval.consistent) return false;
-  scores->photometric = *eval.photometric;
-  scores->consistent = *eval.consistent;
+  const auto read = eval_scores(eval_row(row));
+  if (!read) return false;
+  *scores = *read;
   return true;
 }
 

@@ -12,6 +12,7 @@
 #include "unsup_mvs/core/keyframes.h"
 #include "unsup_mvs/core/training.h"
 #include "unsup_mvs/io/atomic_file.h"
+#include "unsup_mvs/io/fine_tune_job.h"
 #include "unsup_mvs/io/local_ranks.h"
 #include "unsup_mvs/io/run_folder.h"
 #include "unsup_mvs/io/training_data.h"
@@ -113,6 +114,9 @@ void check_training_options(const umvs::Args& args) {
   if (args.integer("augment") != 0 && args.integer("augment") != 1) throw std::invalid_argument("--augment must be 0 or 1");
   umvs::depth_sampling_from_string(args.str("depth-sampling"));
   if (args.given("feature-warp")) umvs::feature_warp_from_string(args.str("feature-warp"));
+  if (args.given("against") && !args.given("eval-only")) {
+    throw std::invalid_argument("--against is compared with the --eval-only checkpoint: give --eval-only too");
+  }
   if (args.given("eval-only")) {
     if (args.on("resume") || args.on("overwrite")) throw std::invalid_argument("--eval-only trains nothing: no --resume or --overwrite");
     if (args.given("feature-warp")) {
@@ -125,6 +129,18 @@ void check_training_options(const umvs::Args& args) {
   if (args.on("resume") && args.on("overwrite")) {
     throw std::invalid_argument("--resume continues the run in --out, --overwrite replaces it: give one of them");
   }
+}
+
+// What the trainer node would do with `candidate` while serving `served` (decide_reload), for
+// adaptations run by hand.
+void print_reload_verdict(const umvs::EvalRow& candidate, const umvs::EvalRow& served) {
+  const auto new_scores = umvs::eval_scores(candidate), served_scores = umvs::eval_scores(served);
+  if (!new_scores || !served_scores) {
+    throw std::runtime_error("no photometric loss or multi-view consistency to compare (no tuple evaluated?)");
+  }
+  const umvs::ReloadVerdict verdict = umvs::decide_reload(*new_scores, *served_scores);
+  std::cout << "trainer rule: " << (verdict.reload ? "reload " + candidate.checkpoint : "keep " + served.checkpoint)
+            << " (" << verdict.comparison << ")\n";
 }
 
 // --world-size/--rank/--master over the torchrun variables over the defaults.
@@ -230,6 +246,9 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
       .flag("resume", "continue exactly from OUT/last.pt (with the options of OUT/run_config.txt)")
       .flag("overwrite", "replace the run in a non-empty OUT (its last.pt, best.pt, log, curve, run_config.txt)")
       .option("eval-only", "", "evaluate this checkpoint on --data and exit")
+      .option("against", "",
+              "with --eval-only: also evaluate this (served) checkpoint on the same data and say whether the "
+              "trainer node's rule would serve the --eval-only one instead")
       .option("loss", "robust",
               "naive | first-order | robust (first-order + top-K) | supervised (smooth L1 on --data's depth_gt/)")
       .option("supervised-data", "",
@@ -372,13 +391,22 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
 
   if (eval_only) {
     const umvs::TrainingData data = open_data();
-    const umvs::EvalRow row = umvs::evaluate_checkpoint(args.str("eval-only"), from_bags ? *data.held_out : *data.train,
-                                                        args.integer("val-tuples"), tcfg, device);
-    std::cout << row.checkpoint << ": " << umvs::describe(row) << "\n";
+    auto evaluate = [&](const std::string& checkpoint) {
+      umvs::EvalRow row = umvs::evaluate_checkpoint(checkpoint, from_bags ? *data.held_out : *data.train,
+                                                    args.integer("val-tuples"), tcfg, device);
+      std::cout << row.checkpoint << ": " << umvs::describe(row) << "\n";
+      return row;
+    };
+    // The served model first, so that eval.csv's last row stays the --eval-only checkpoint's.
+    std::vector<umvs::EvalRow> rows;
+    if (args.given("against")) rows.push_back(evaluate(args.str("against")));
+    rows.push_back(evaluate(args.str("eval-only")));
+    if (args.given("against")) print_reload_verdict(rows.back(), rows.front());
     if (!args.str("out").empty()) {
       umvs::make_directories(args.str("out"));
       umvs::write_file_atomically(args.str("out") + "/eval.csv", [&](std::ostream& os) {
-        os << umvs::csv_header(umvs::eval_columns()) << "\n" << umvs::format_csv_row(row) << "\n";
+        os << umvs::csv_header(umvs::eval_columns()) << "\n";
+        for (const auto& row : rows) os << umvs::format_csv_row(row) << "\n";
       });
     }
     return 0;

@@ -17,6 +17,7 @@
 
 #include "unsup_mvs/core/keyframes.h"
 #include "unsup_mvs/io/child_process.h"
+#include "unsup_mvs/io/run_folder.h"
 
 namespace umvs {
 
@@ -48,8 +49,11 @@ struct EvalScores {
   double consistent = 0.0;   // share of held-out depth confirmed by other views (higher is better)
 };
 
+// The two scores of an evaluation; nullopt when it lacks one of them.
+std::optional<EvalScores> eval_scores(const EvalRow& row);
 // Reads the held-out photometric loss and multi-view consistency from an eval.csv written by
-// `umvs train --eval-only ... --out DIR`. Returns false when the file is missing or lacks them.
+// `umvs train --eval-only ... --out DIR` (its last row). Returns false when the file is missing or
+// lacks them.
 bool read_eval_scores(const std::string& eval_csv, EvalScores* scores);
 
 // A photometric loss lower by less than this fraction of the served model's is no evidence either:
