@@ -297,6 +297,10 @@ TEST(TrainCommand, EvalOnlyAgainstAServedModelGivesTheTrainerNodesVerdict) {
   EXPECT_DOUBLE_EQ(last.photometric, *eval_row(rows[1]).photometric);
   EXPECT_DOUBLE_EQ(last.consistent, *eval_row(rows[1]).consistent);
 
+  // A missing checkpoint on either side is refused before anything is evaluated or written.
+  EXPECT_NE(run(common + " --eval-only " + out + "/missing.pt --against " + shipped + " --out " + out + "/e"), 0);
+  EXPECT_NE(run(common + " --eval-only " + shipped + " --against " + out + "/missing.pt --out " + out + "/e"), 0);
+  EXPECT_FALSE(std::filesystem::exists(out + "/e"));
   // --against means nothing without --eval-only: refused before anything is written.
   EXPECT_NE(run(common + " --out " + out + "/d --steps 1 --against " + shipped), 0);
   EXPECT_FALSE(std::filesystem::exists(out + "/d"));

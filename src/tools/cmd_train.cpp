@@ -12,6 +12,7 @@
 #include "unsup_mvs/core/keyframes.h"
 #include "unsup_mvs/core/training.h"
 #include "unsup_mvs/io/atomic_file.h"
+#include "unsup_mvs/io/checkpoint.h"
 #include "unsup_mvs/io/fine_tune_job.h"
 #include "unsup_mvs/io/local_ranks.h"
 #include "unsup_mvs/io/run_folder.h"
@@ -397,6 +398,11 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
       std::cout << row.checkpoint << ": " << umvs::describe(row) << "\n";
       return row;
     };
+    // Both checkpoints are checked before either is evaluated: a bad second path would otherwise
+    // be found only after the first evaluation (47 s at 640x480).
+    if (args.given("against")) {
+      for (const char* option : {"against", "eval-only"}) umvs::load_model(args.str(option), torch::kCPU);
+    }
     // The served model first, so that eval.csv's last row stays the --eval-only checkpoint's.
     std::vector<umvs::EvalRow> rows;
     if (args.given("against")) rows.push_back(evaluate(args.str("against")));
