@@ -1,5 +1,5 @@
-// Helpers of the command-line fault tests (test_reliability_cli.cpp, test_bag_reliability_cli.cpp):
-// run the built `umvs`, compare files before and after, write small synthetic scenes.
+// Helpers of the command-line tests (test_reliability_cli.cpp, test_bag_reliability_cli.cpp,
+// test_bag_judge_audit.cpp): run the built `umvs` or a script, compare files before and after, write small synthetic scenes.
 #pragma once
 
 #include <sys/wait.h>
@@ -22,12 +22,11 @@ struct Result {
   std::string output;  // stdout and/or stderr (see run_umvs)
 };
 
-// `umvs ARGS` through the shell (arguments are ours, quoted where needed). `redirect` chooses what
-// Result::output holds: stdout and stderr (default), only stdout ("2>/dev/null") or only stderr
-// ("2>&1 >/dev/null").
-inline Result run_umvs(const std::string& args, const std::string& redirect = "2>&1") {
+// A shell command line (ours, quoted where needed). `redirect` chooses what Result::output holds:
+// stdout and stderr (default), only stdout ("2>/dev/null") or only stderr ("2>&1 >/dev/null").
+inline Result run_shell(const std::string& command, const std::string& redirect = "2>&1") {
   Result r;
-  const std::string cmd = umvs_binary() + " " + args + " " + redirect;
+  const std::string cmd = command + " " + redirect;
   FILE* pipe = ::popen(cmd.c_str(), "r");
   if (!pipe) return r;
   char buf[4096];
@@ -35,6 +34,11 @@ inline Result run_umvs(const std::string& args, const std::string& redirect = "2
   const int status = ::pclose(pipe);
   r.status = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
   return r;
+}
+
+// `umvs ARGS` through the shell, as run_shell.
+inline Result run_umvs(const std::string& args, const std::string& redirect = "2>&1") {
+  return run_shell(umvs_binary() + " " + args, redirect);
 }
 
 inline bool contains(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
