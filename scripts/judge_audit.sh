@@ -83,6 +83,7 @@ for spec in $SCENES; do
       fi
       # eval.csv: the served model's row, then the candidate's; the verdict is the C++ rule's own line.
       verdict=$(sed -n 's/^trainer rule: \(reload\|keep\) .*/\1/p' "$judged.log")
+      [ -n "$verdict" ] || { echo "[audit] no 'trainer rule:' verdict in $judged.log" >&2; exit 1; }
       awk -F, -v what="$scene $seed, $adapt, seed $run_seed" -v verdict="$verdict" '
         NR == 1 { for (i = 1; i <= NF; ++i) col[$i] = i; next }
         NR == 2 { e0 = $col["abs_err"]; r0 = $col["abs_rel"]; w0 = $col["within_1pct"]

@@ -1,5 +1,6 @@
 // Helpers of the command-line tests (test_reliability_cli.cpp, test_bag_reliability_cli.cpp,
-// test_bag_judge_audit.cpp): run the built `umvs` or a script, compare files before and after, write small synthetic scenes.
+// test_bag_judge_audit.cpp): run the built `umvs` or a script, compare files before and after,
+// write small synthetic scenes.
 #pragma once
 
 #include <sys/wait.h>
