@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 
 #include "unsup_mvs/core/camera.h"
 #include "unsup_mvs/core/view_selection.h"
@@ -128,6 +129,31 @@ TEST(ViewSelection, RanksTheBestBaselineFirst) {
   ASSERT_GE(ranked.size(), 2u);
   EXPECT_EQ(ranked[0].index, 1);  // 5 degrees
   EXPECT_EQ(ranked[1].index, 2);  // 30 deg: exp(-25^2/200) = 0.04 per point beats 1 deg: exp(-8)
+}
+
+// A street drive: the camera looks sideways at facades about 10 m away, the depth range it is
+// given is 2.7-45 m (as for the rendered street, whose planes reach far past the facades).
+TEST(ViewSelection, AWideDepthRangeIsScoredWhereMostOfTheSceneIs) {
+  Camera ref = make_camera();
+  ref.T_cam_world = Eigen::Matrix4d::Identity();
+  std::vector<Camera> cands;
+  for (double baseline : {0.25, 1.0, 4.0}) {
+    Camera c = ref;
+    c.T_cam_world.topRightCorner<3, 1>() = Eigen::Vector3d(-baseline, 0, 0);  // centre at x = +baseline
+    cands.push_back(c);
+  }
+  const double near = 2.7, far = 45.0;
+  const auto best_at = [&](double depth) { return rank_source_views(sample_frustum_points(ref, depth), ref, cands).at(0).index; };
+  const int on_the_facades = best_at(10.0);
+  EXPECT_EQ(on_the_facades, 1);  // 1 m: 5.7 degrees at 10 m
+  EXPECT_EQ(best_at(view_selection_depth(near, far)), on_the_facades);
+  EXPECT_EQ(best_at(0.5 * (near + far)), 2);  // the old rule: 24 m, where only 4 m triangulates
+
+  EXPECT_NEAR(view_selection_depth(near, far), std::sqrt(near * far), 1e-12);
+  EXPECT_DOUBLE_EQ(view_selection_depth(2.0, 2.0), 2.0);
+  EXPECT_THROW(view_selection_depth(0.0, 10.0), std::invalid_argument);
+  EXPECT_THROW(view_selection_depth(5.0, 1.0), std::invalid_argument);
+  EXPECT_THROW(view_selection_depth(1.0, std::numeric_limits<double>::infinity()), std::invalid_argument);
 }
 
 }  // namespace

@@ -4,6 +4,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <stdexcept>
+#include <string>
 
 namespace umvs {
 
@@ -39,6 +41,14 @@ std::vector<Eigen::Vector3d> sample_frustum_points(const Camera& ref, double dep
     }
   }
   return pts;
+}
+
+double view_selection_depth(double near, double far) {
+  if (!(near > 0.0) || !(far >= near) || !std::isfinite(far)) {
+    throw std::invalid_argument("view_selection_depth: need 0 < near <= far, got near " + std::to_string(near) +
+                                ", far " + std::to_string(far));
+  }
+  return std::sqrt(near * far);
 }
 
 std::vector<ScoredView> rank_source_views(const std::vector<Eigen::Vector3d>& points,

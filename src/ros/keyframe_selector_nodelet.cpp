@@ -28,6 +28,7 @@
 #include "unsup_mvs/KeyframeSet.h"
 #include "unsup_mvs/core/depth_range.h"
 #include "unsup_mvs/core/keyframes.h"
+#include "unsup_mvs/core/view_selection.h"
 #include "unsup_mvs/io/ros/ros_conversions.h"
 #include "unsup_mvs/ros/nodelets.h"
 #include "unsup_mvs/ros/params.h"
@@ -267,7 +268,7 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
     // (max_wait_s): a robot that stands still gets the depth of where it stands.
     const umvs::DepthRange range = depth_range_->range();
     std::vector<int64_t> given_up;
-    for (const auto& ready : buffer_->take_ready_references(0.5 * (range.near + range.far), &given_up, stamp)) {
+    for (const auto& ready : buffer_->take_ready_references(umvs::view_selection_depth(range.near, range.far), &given_up, stamp)) {
       publishSet(ready, range.near, range.far);
     }
     for (const int64_t id : given_up) {
@@ -281,7 +282,7 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
   bool onFlush(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
     std::lock_guard<std::mutex> lock(mutex_);
     const umvs::DepthRange range = depth_range_->range();
-    const auto ready = buffer_->take_waiting_references(0.5 * (range.near + range.far));
+    const auto ready = buffer_->take_waiting_references(umvs::view_selection_depth(range.near, range.far));
     for (const auto& r : ready) publishSet(r, range.near, range.far);
     res.success = true;
     res.message = "sent " + std::to_string(ready.size()) + " keyframe set(s); " +

@@ -26,8 +26,15 @@ double view_selection_score(const std::vector<Eigen::Vector3d>& points_world, co
                             const Camera& src, const ViewScoreConfig& config = {});
 
 // A grid of grid x grid points on the reference image back-projected at `depth`: stand-in
-// surface points when no geometry is known yet (keyframes: the middle of the depth range).
+// surface points when no geometry is known yet (keyframes: view_selection_depth of the range).
 std::vector<Eigen::Vector3d> sample_frustum_points(const Camera& ref, double depth, int grid = 16);
+
+// The depth at which keyframes are scored when only the depth range [near, far] is known: its
+// geometric mean, the middle of the range on a log scale. The arithmetic middle lies far behind
+// most of a wide range (a street seen at 2.7-45 m: 24 m, where every neighbour's triangulation
+// angle is small), so it picked far-apart neighbours (docs/results.md, 2026-12-02, ninth session).
+// Throws std::invalid_argument unless 0 < near <= far (both finite).
+double view_selection_depth(double near, double far);
 
 struct ScoredView {
   int index = 0;

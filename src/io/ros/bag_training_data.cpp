@@ -67,7 +67,7 @@ BagSource::BagSource(std::shared_ptr<const std::vector<BagKeyframe>> keyframes, 
   tuple_config_.validate();
   const auto& all = *keyframes_;
   const size_t needed = static_cast<size_t>(tuple_config_.neighbours_needed());
-  const double score_depth = 0.5 * (config_.depth_min + config_.depth_max);
+  const double score_depth = view_selection_depth(config_.depth_min, config_.depth_max);
   for (size_t r = 0; r < all.size(); ++r) {
     const bool wanted = split_ == BagSplit::kAll || (split_ == BagSplit::kHeldOut) == all[r].held_out;
     if (!wanted) continue;
