@@ -12,7 +12,9 @@
 # Environment: DEMO_SCENE (room), DEMO_SEED (7), DEMO_VIEWS (24), DEMO_WIDTH x DEMO_HEIGHT (640 x 512,
 #              the default model's training size; images and inference), DEMO_PLANES (128),
 #              DEMO_RATE (playback factor, 0.25: slow enough for a 2-core CPU to infer every
-#              keyframe at that size), DEMO_RVIZ (1; 0 = no RViz, no screenshot), CHECKPOINT (default model).
+#              keyframe at that size), DEMO_RVIZ (1; 0 = no RViz, no screenshot), CHECKPOINT (default model),
+#              DEMO_TEXTURES (none: procedural textures, the same scene on every machine; `installed`
+#              after scripts/install_textures.sh renders photographs, a different scene with other scores).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$PWD
@@ -25,6 +27,7 @@ HEIGHT=${DEMO_HEIGHT:-512}
 PLANES=${DEMO_PLANES:-128}
 RATE=${DEMO_RATE:-0.25}
 RVIZ=${DEMO_RVIZ:-1}
+TEXTURES=${DEMO_TEXTURES:-none}
 CHECKPOINT=$(realpath "${CHECKPOINT:-$ROOT/models/unsup_mvsnet.pt}")
 start=$(date +%s)
 say() { echo "[demo $(($(date +%s) - start))s] $*"; }
@@ -41,7 +44,8 @@ UMVS=$ROOT/build/devel/lib/unsup_mvs/umvs
 rm -rf "$WORK"
 mkdir -p "$WORK"
 say "rendering a synthetic $SCENE ($VIEWS views, ${WIDTH}x$HEIGHT) with ground truth into $WORK/scene"
-"$UMVS" synth --scene "$SCENE" --seed "$SEED" --views "$VIEWS" --width "$WIDTH" --height "$HEIGHT" --out "$WORK/scene" >/dev/null
+"$UMVS" synth --scene "$SCENE" --seed "$SEED" --views "$VIEWS" --width "$WIDTH" --height "$HEIGHT" --textures "$TEXTURES" \
+  --out "$WORK/scene" >/dev/null
 "$UMVS" bag --data "$WORK/scene" --out "$WORK/scene.bag" --rate 2 >/dev/null
 "$UMVS" bag --inspect "$WORK/scene.bag"
 
