@@ -268,7 +268,8 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
     // (max_wait_s): a robot that stands still gets the depth of where it stands.
     const umvs::DepthRange range = depth_range_->range();
     std::vector<int64_t> given_up;
-    for (const auto& ready : buffer_->take_ready_references(umvs::view_selection_depth(range.near, range.far), &given_up, stamp)) {
+    const double score_depth = umvs::view_selection_depth(range.near, range.far);
+    for (const auto& ready : buffer_->take_ready_references(score_depth, &given_up, stamp)) {
       publishSet(ready, range.near, range.far);
     }
     for (const int64_t id : given_up) {
