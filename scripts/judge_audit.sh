@@ -13,7 +13,9 @@
 #   environment: UMVS, THREADS (2), STEPS (150), SEEDS ("1 2": --seed of each fine-tuning run),
 #                ADAPT ("photometric self"; also "aggressive", 10x the learning rate),
 #                SCENES ("room:301 facade:302 dtu_like:303": `umvs synth` recipe:seed),
-#                SERVED (models/unsup_mvsnet.pt)
+#                SERVED (models/unsup_mvsnet.pt),
+#                TEXTURES ("none": procedural, the same scenes on every machine; "installed" renders
+#                the photographs of scripts/install_textures.sh where they are, another scene)
 # Writes WORK_DIR/audit.md (one row per run and a tally) and prints it.
 set -euo pipefail
 
@@ -27,6 +29,7 @@ SEEDS="${SEEDS:-1 2}"
 ADAPT="${ADAPT:-photometric self}"
 SCENES="${SCENES:-room:301 facade:302 dtu_like:303}"
 SERVED="${SERVED:-$repo/models/unsup_mvsnet.pt}"
+TEXTURES="${TEXTURES:-none}"
 [ -x "$UMVS" ] || { echo "umvs not found at $UMVS (set UMVS=/path/to/umvs)" >&2; exit 1; }
 [ -f "$SERVED" ] || { echo "served model not found: $SERVED" >&2; exit 1; }
 mkdir -p "$WORK"
@@ -54,7 +57,7 @@ for spec in $SCENES; do
   scene=${spec%%:*} seed=${spec#*:}
   data="$WORK/${scene}_$seed"
   [ -f "$data/pair.txt" ] || "$UMVS" synth --out "$data" --scene "$scene" --seed "$seed" --views 10 --width 320 \
-    --height 256 --gt-samples 0 --threads "$THREADS" >"$data.synth.log" 2>&1 ||
+    --height 256 --gt-samples 0 --textures "$TEXTURES" --threads "$THREADS" >"$data.synth.log" 2>&1 ||
     { echo "[audit] rendering failed, see $data.synth.log" >&2; exit 1; }
   [ -f "$data.bag" ] || "$UMVS" bag --data "$data" --out "$data.bag" --depth-topic /camera/depth >"$data.bag.log" 2>&1 ||
     { echo "[audit] writing the log failed, see $data.bag.log" >&2; exit 1; }
@@ -108,5 +111,5 @@ done
   awk -F'|' '{ gsub(/ /, "", $4); gsub(/ /, "", $7); n[$7 " " $4]++; total++ }
     END { printf "%d runs: served %d better, %d mixed, %d worse; kept %d better, %d mixed, %d worse\n", total,
           n["reload better"], n["reload mixed"], n["reload worse"], n["keep better"], n["keep mixed"], n["keep worse"] }' "$rows"
-  echo "($(( $(date +%s) - start )) s, $THREADS threads, $STEPS steps per run, served model $SERVED)"
+  echo "($(( $(date +%s) - start )) s, $THREADS threads, $STEPS steps per run, served model $SERVED, textures $TEXTURES)"
 } | tee "$WORK/audit.md"
