@@ -50,17 +50,19 @@ std::string join(const std::vector<std::string>& words) {
 }
 
 // The fake umvs: `train ... --out DIR` copies FAKE/train_log.csv to DIR (when prepared), writes
-// DIR/best.pt, waits while FAKE/hold exists, prints "step 100 done" and exits with FAKE/train_status
-// (default 0); `train ... --eval-only CKPT --out DIR` copies FAKE/eval_new.csv (CKPT ends in
-// best.pt) or FAKE/eval_served.csv to DIR/eval.csv. Each call appends its arguments to FAKE/calls.
+// DIR/best.pt (and DIR/blended.pt with --fine-tuned-share), waits while FAKE/hold exists, prints
+// "step 100 done" and exits with FAKE/train_status (default 0); `train ... --eval-only CKPT --out
+// DIR` copies FAKE/eval_new.csv (CKPT ends in best.pt or blended.pt) or FAKE/eval_served.csv to
+// DIR/eval.csv. Each call appends its arguments to FAKE/calls.
 constexpr char kFakeUmvs[] = R"(#!/bin/sh
 F=$(dirname "$0")
 echo "$*" >> "$F/calls"
-out=""; ckpt=""
+out=""; ckpt=""; share=""
 while [ $# -gt 0 ]; do
   case "$1" in
     --out) out="$2"; shift ;;
     --eval-only) ckpt="$2"; shift ;;
+    --fine-tuned-share) share="$2"; shift ;;
   esac
   shift
 done
@@ -69,12 +71,13 @@ if [ -z "$ckpt" ]; then
   echo $$ > "$F/train.pid"
   if [ -f "$F/train_log.csv" ]; then cp "$F/train_log.csv" "$out/.log" && mv "$out/.log" "$out/train_log.csv"; fi
   echo "new model" > "$out/best.pt"
+  if [ -n "$share" ]; then echo "blend of $share" > "$out/blended.pt"; fi
   while [ -f "$F/hold" ]; do sleep 0.02; done
   echo "step 100 done"
   exit $(cat "$F/train_status" 2>/dev/null || echo 0)
 fi
 case "$ckpt" in
-  */best.pt) cp "$F/eval_new.csv" "$out/eval.csv" ;;
+  */best.pt|*/blended.pt) cp "$F/eval_new.csv" "$out/eval.csv" ;;
   *) cp "$F/eval_served.csv" "$out/eval.csv" ;;
 esac
 echo "evaluated $ckpt"
@@ -183,6 +186,14 @@ TEST(FineTuneConfig, ValidateNamesTheBadField) {
   bad = c;
   bad.train_args = {"--nproc", "2"};
   EXPECT_THAT([&] { bad.validate(); }, ThrowsMessage<std::invalid_argument>(HasSubstr("train_args must not set --nproc: set local_ranks instead")));
+  for (double share : {0.0, 1.5}) {
+    bad = c;
+    bad.fine_tuned_share = share;
+    EXPECT_THAT([&] { bad.validate(); }, ThrowsMessage<std::invalid_argument>(HasSubstr("fine_tuned_share must be in (0, 1]")));
+  }
+  bad = c;
+  bad.train_args = {"--fine-tuned-share", "0.5"};
+  EXPECT_THAT([&] { bad.validate(); }, ThrowsMessage<std::invalid_argument>(HasSubstr("train_args must not set --fine-tuned-share")));
   bad = c;
   bad.world_frame = "";
   EXPECT_THAT([&] { bad.validate(); }, ThrowsMessage<std::invalid_argument>(HasSubstr("world_frame must not be empty")));
@@ -314,6 +325,24 @@ TEST_F(FineTuneJobTest, ProgressComesFromTheLogAndABetterModelIsReadyToReload) {
   EXPECT_FALSE(job.busy());
   EXPECT_TRUE(fs::exists(models_ + "/" + a.job_id + ".pt"));
   EXPECT_EQ(read_text(served_), "served model");
+}
+
+TEST_F(FineTuneJobTest, WithAFineTunedShareTheBlendIsWhatIsJudgedAndServed) {
+  config_.fine_tuned_share = 0.5;
+  prepare_evals(0.10, 0.30, 0.12, 0.25);
+  FineTuneJob job(config_);
+  const FineTuneAnswer a = job.start(request(), served_);
+  ASSERT_TRUE(a.ok) << a.message;
+  const std::string job_dir = models_ + "/" + a.job_id;
+  ASSERT_TRUE(poll_until_idle_or_ready(job)) << job.describe();
+  ASSERT_EQ(job.phase(), FineTuneJob::Phase::kReadyToReload) << job.describe();
+  EXPECT_EQ(read_text(job.reload_checkpoint()), "blend of 0.5\n");
+  const auto calls = lines_of(fake_ + "/calls");
+  ASSERT_EQ(calls.size(), 3u);
+  EXPECT_THAT(calls[0], HasSubstr(" --init " + served_ + " --steps 100 --out " + job_dir + " --fine-tuned-share 0.5"));
+  EXPECT_THAT(calls[1], HasSubstr(" --eval-only " + job_dir + "/blended.pt --out " + job_dir + "/eval_new"));
+  EXPECT_THAT(calls[2], HasSubstr(" --eval-only " + served_ + " --out " + job_dir + "/eval_served"));
+  EXPECT_TRUE(fs::exists(job_dir + "/best.pt")) << "the fine-tuned weights as trained stay in the job's folder";
 }
 
 TEST_F(FineTuneJobTest, AModelInferenceRefusesDoesNotStayUnderTheOutputName) {

@@ -15,13 +15,18 @@ namespace umvs {
 
 namespace fs = std::filesystem;
 
+namespace {
+
+std::string number(double v) {
+  std::ostringstream s;
+  s.precision(17);  // round-trips every double
+  s << v;
+  return s.str();
+}
+
+}  // namespace
+
 std::vector<std::string> keyframe_stream_train_args(const KeyframeStreamConfig& stream) {
-  auto number = [](double v) {
-    std::ostringstream s;
-    s.precision(17);  // round-trips every double
-    s << v;
-    return s.str();
-  };
   const KeyframeConfig& k = stream.keyframes;
   return {"--rectified",      stream.rectified ? "1" : "0",
           "--min-translation", number(k.min_translation),
@@ -48,8 +53,11 @@ void FineTuneConfig::validate() const {
   if (local_ranks < 1) {
     throw std::invalid_argument("local_ranks must be >= 1, got " + std::to_string(local_ranks));
   }
+  if (!(fine_tuned_share > 0 && fine_tuned_share <= 1)) {
+    throw std::invalid_argument("fine_tuned_share must be in (0, 1] (1 = no blend), got " + number(fine_tuned_share));
+  }
   // The job sets these itself for every training and evaluation run.
-  for (const char* reserved : {"--bag", "--data", "--init", "--steps", "--out", "--eval-only"}) {
+  for (const char* reserved : {"--bag", "--data", "--init", "--steps", "--out", "--eval-only", "--fine-tuned-share"}) {
     if (std::find(train_args.begin(), train_args.end(), reserved) != train_args.end()) {
       throw std::invalid_argument(std::string("train_args must not set ") + reserved + ": every job sets it");
     }
@@ -188,6 +196,7 @@ FineTuneAnswer FineTuneJob::start(const FineTuneRequest& req, const std::string&
   const int steps = req.steps > 0 ? req.steps : config_.default_steps;
   argv.insert(argv.end(), {"--init", init, "--steps", std::to_string(steps), "--out", job_dir});
   if (config_.local_ranks > 1) argv.insert(argv.end(), {"--nproc", std::to_string(config_.local_ranks)});
+  if (config_.fine_tuned_share < 1) argv.insert(argv.end(), {"--fine-tuned-share", number(config_.fine_tuned_share)});
   try {
     fs::create_directories(job_dir);
     child_.start(argv);
@@ -251,6 +260,10 @@ void FineTuneJob::read_training_log() {
   p.eta_seconds = p.step > 0 ? static_cast<float>(elapsed / p.step * (p.total_steps - p.step)) : -1.f;
 }
 
+std::string FineTuneJob::candidate_path() const {
+  return job_dir_ + (config_.fine_tuned_share < 1 ? "/blended.pt" : "/best.pt");
+}
+
 void FineTuneJob::start_evaluation(const std::string& checkpoint, const std::string& out_dir, Phase phase) {
   std::vector<std::string> argv = {config_.umvs_path, "train"};
   const auto data = data_args();
@@ -285,7 +298,7 @@ std::optional<FineTuneProgress> FineTuneJob::poll(const std::function<void(const
     }
     if (phase_ == Phase::kTraining) {
       read_training_log();
-      start_evaluation(job_dir_ + "/best.pt", job_dir_ + "/eval_new", Phase::kEvaluatingNew);
+      start_evaluation(candidate_path(), job_dir_ + "/eval_new", Phase::kEvaluatingNew);
       return report("evaluating", "training done; comparing with the served model on held-out keyframes");
     }
     if (phase_ == Phase::kEvaluatingNew) {
@@ -314,7 +327,7 @@ FineTuneProgress FineTuneJob::finish() {
   // Publish under the new name only (never replacing anything, not through a planted link), then
   // let inference check it; a model inference refuses does not stay under the output name.
   try {
-    copy_file_to_new_name(job_dir_ + "/best.pt", output_path_);
+    copy_file_to_new_name(candidate_path(), output_path_);
   } catch (const std::exception& e) {
     return report("failed", comparison_ + "; the new model stays in " + job_dir_ + ": " + e.what());
   }

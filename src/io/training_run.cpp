@@ -10,6 +10,7 @@
 #include <sstream>
 
 #include "unsup_mvs/core/memory_bounds.h"
+#include "unsup_mvs/core/weight_blend.h"
 #include "unsup_mvs/io/atomic_file.h"
 #include "unsup_mvs/io/checkpoint.h"
 #include "unsup_mvs/io/image_io.h"
@@ -111,6 +112,12 @@ void TrainingRunConfig::validate() const {
                                 std::to_string(data.views_loss));
   }
   if (self_training_every > 0) label_rule.validate();
+  if (!(fine_tuned_share > 0 && fine_tuned_share <= 1)) {
+    throw std::invalid_argument("fine_tuned_share must be in (0, 1] (1 = no blend), got " + std::to_string(fine_tuned_share));
+  }
+  if (fine_tuned_share < 1 && init.empty()) {
+    throw std::invalid_argument("fine_tuned_share < 1 blends with the starting checkpoint: give init");
+  }
   distributed.validate();
 }
 
@@ -438,10 +445,22 @@ TrainingRun::Result TrainingRun::run(
     if (on_step) on_step(row, step_ - first, to_do);
     if (result.out_of_time) break;
   }
+  if (writes_files() && config_.fine_tuned_share < 1) write_blended();
   result.step = step_;
   result.best_score = best_;
   result.best_metric = best_metric_;
   return result;
+}
+
+void TrainingRun::write_blended() {
+  LoadedModel best = load_model(best_path(), torch::kCPU);
+  LoadedModel start = load_model(config_.init, torch::kCPU);
+  blend_weights(best.model, start.model, config_.fine_tuned_share);
+  CheckpointMeta meta;  // best.pt's step; not its optimiser state or scores, which are not the blend's
+  meta.step = best.meta.step;
+  save_checkpoint(blended_path(), best.model, meta);
+  messages_ << "blended.pt: " << config_.fine_tuned_share << " x best.pt + " << 1 - config_.fine_tuned_share << " x "
+            << config_.init << "\n";
 }
 
 std::vector<TrainingTuple> fixed_tuples(const TupleSource& source, int limit) {

@@ -168,6 +168,7 @@ umvs::FineTuneConfig fine_tune_config_from_ros(const ros::NodeHandle& nh) {
   nh.param("steps", c.default_steps, c.default_steps);
   nh.param("train_args", c.train_args, c.train_args);
   nh.param("local_ranks", c.local_ranks, c.local_ranks);
+  nh.param("fine_tuned_share", c.fine_tuned_share, c.fine_tuned_share);
   // The bags are read as the keyframe_selector reads the live stream: the launch files load its
   // YAML (and ~rectified) into ~keyframes/ too.
   try {

@@ -79,7 +79,7 @@ umvs::TrainingData open_bags(const umvs::Args& args, const umvs::TupleConfig& co
 // Options that a --resume may change: they do not change what the run computes. All others
 // (data, sizes, loss, optimiser, seed, validation, ...) are the run's configuration.
 const std::vector<std::string> kMayChangeOnResume = {"steps", "max-minutes", "out", "resume", "overwrite", "eval-only", "device",
-                                                     "threads", "nproc", "master", "dist-timeout"};
+                                                     "threads", "nproc", "master", "dist-timeout", "fine-tuned-share"};
 
 // Every option as given or defaulted; file and folder paths made absolute, so that a resume from
 // another working directory compares equal.
@@ -244,6 +244,10 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
       .option("holdout-every", "5", "--bag: hold out every k-th keyframe for validation (0 = none)")
       .option("out", "", "output folder (required unless --eval-only)")
       .option("init", "", "start from this checkpoint (ours or MVSNet_pytorch weights); default random")
+      .option("fine-tuned-share", "1",
+              "with --init: at the end also write OUT/blended.pt, this share of best.pt's weights plus the rest of "
+              "--init's (weight-space interpolation toward the starting model; the trainer node's ~fine_tuned_share, "
+              "docs/results.md); 1 = off")
       .flag("resume", "continue exactly from OUT/last.pt (with the options of OUT/run_config.txt)")
       .flag("overwrite", "replace the run in a non-empty OUT (its last.pt, best.pt, log, curve, run_config.txt)")
       .option("eval-only", "", "evaluate this checkpoint on --data and exit")
@@ -426,6 +430,7 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
   run.options = run_config_of(args);
   run.may_change_on_resume = kMayChangeOnResume;
   run.init = args.str("init");
+  run.fine_tuned_share = args.real("fine-tuned-share");
   run.new_model.depth_sampling = umvs::depth_sampling_from_string(args.str("depth-sampling"));
   run.new_model.input_normalization = umvs::input_normalization_from_string(args.str("input-normalization"));
   if (args.given("feature-warp")) run.feature_warp = umvs::feature_warp_from_string(args.str("feature-warp"));
@@ -479,6 +484,7 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
   }
   std::cout << "trained to step " << result.step << "; checkpoints " << training.last_path() << ", "
             << training.best_path() << " (best score " << result.best_score << "); log " << training.log_path()
-            << (result.skipped_steps ? "; " + std::to_string(result.skipped_steps) + " steps skipped" : "") << "\n";
+            << (result.skipped_steps ? "; " + std::to_string(result.skipped_steps) + " steps skipped" : "")
+            << (run.fine_tuned_share < 1 ? "; blended with --init: " + training.blended_path() : "") << "\n";
   return 0;
 }

@@ -35,6 +35,11 @@ struct FineTuneConfig {
   int default_steps = 500;              // steps of a request that gives 0
   std::vector<std::string> train_args;  // extra `umvs train` arguments (size, planes, held-out share)
   int local_ranks = 1;  // each training job as this many data-parallel ranks on this machine (--nproc)
+  // The model a job judges and may serve: this share of the fine-tuned weights plus the rest of
+  // the model it started from (`umvs train --fine-tuned-share`, core/weight_blend.h); 1 = the
+  // fine-tuned weights as trained (default). Measured in docs/results.md (2026-12-02, eleventh
+  // session): 0.5 undid most of what adaptation broke on rendered scenes, not all of it.
+  double fine_tuned_share = 1.0;
   KeyframeStreamConfig keyframes;       // how `umvs train` reads the bags (as the keyframe_selector)
 
   // Throws std::invalid_argument naming the bad field.
@@ -142,6 +147,7 @@ class FineTuneJob {
 
  private:
   std::vector<std::string> data_args() const;  // --bag ... and the topic/keyframe/extra options
+  std::string candidate_path() const;          // the job's model: blended.pt, or best.pt without a blend
   void start_evaluation(const std::string& checkpoint, const std::string& out_dir, Phase phase);
   void read_training_log();
   FineTuneProgress finish();

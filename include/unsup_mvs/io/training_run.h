@@ -49,6 +49,9 @@ struct TrainingRunConfig {
   int self_training_every = 0;
   int pseudo_label_tuples = 0;           // tuples labelled per round (0 = all)
   FusionConfig label_rule;
+  // < 1 (needs init): at the end of the run also write OUT/blended.pt, this share of best.pt's
+  // weights plus the rest of init's (core/weight_blend.h); 1 = off.
+  double fine_tuned_share = 1.0;
   torch::Device device = torch::kCPU;
   // Data-parallel (world_size > 1): this process is one rank. Each step has world_size * batch
   // tuples, in the order one process would draw them; rank r trains on the r-th `batch` of them,
@@ -86,6 +89,7 @@ class TrainingRun {
   std::string last_path() const { return config_.out + "/last.pt"; }
   std::string best_path() const { return config_.out + "/best.pt"; }
   std::string log_path() const { return config_.out + "/train_log.csv"; }
+  std::string blended_path() const { return config_.out + "/blended.pt"; }
 
  private:
   void checkpoint(TrainLogRow& row);
@@ -93,6 +97,7 @@ class TrainingRun {
   std::vector<TrainingTuple> next_tuples();     // this rank's share of the next step
   void label_round(MvsNet& labeller);
   void write_curve() const;
+  void write_blended();
 
   TrainingRunConfig config_;
   TrainingData data_;
