@@ -15,7 +15,8 @@
 #                SCENES ("room:301 facade:302 dtu_like:303": `umvs synth` recipe:seed),
 #                SERVED (models/unsup_mvsnet.pt),
 #                TEXTURES ("none": procedural, the same scenes on every machine; "installed" renders
-#                the photographs of scripts/install_textures.sh where they are, another scene)
+#                the photographs of scripts/install_textures.sh where they are, another scene; a
+#                scene WORK_DIR holds from other textures is rendered again)
 # Writes WORK_DIR/audit.md (one row per run and a tally) and prints it.
 set -euo pipefail
 
@@ -56,9 +57,15 @@ start=$(date +%s)
 for spec in $SCENES; do
   scene=${spec%%:*} seed=${spec#*:}
   data="$WORK/${scene}_$seed"
+  # A render (and its log) made with other textures is another scene: render again.
+  if [ -f "$data/pair.txt" ] && [ "$(cat "$data.textures" 2>/dev/null)" != "$TEXTURES" ]; then
+    echo "[audit] $data was rendered with other textures than '$TEXTURES': rendering it again" >&2
+    rm -rf "$data" "$data.bag" "$WORK/ft/${scene}_${seed}_"* "$WORK/judge/${scene}_${seed}_"*
+  fi
   [ -f "$data/pair.txt" ] || "$UMVS" synth --out "$data" --scene "$scene" --seed "$seed" --views 10 --width 320 \
     --height 256 --gt-samples 0 --textures "$TEXTURES" --threads "$THREADS" >"$data.synth.log" 2>&1 ||
     { echo "[audit] rendering failed, see $data.synth.log" >&2; exit 1; }
+  echo "$TEXTURES" >"$data.textures"
   [ -f "$data.bag" ] || "$UMVS" bag --data "$data" --out "$data.bag" --depth-topic /camera/depth >"$data.bag.log" 2>&1 ||
     { echo "[audit] writing the log failed, see $data.bag.log" >&2; exit 1; }
   # The trainer node's train_args (config/trainer.yaml) and the scene's depth range.

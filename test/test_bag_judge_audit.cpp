@@ -16,9 +16,9 @@ using test::run_shell;
 
 TEST(JudgeAuditScript, ARunGivesTheRulesVerdictAndTheGroundTruthItNeverSaw) {
   const std::string work = test::temp_dir("judge_audit");
-  const test::Result r = run_shell("STEPS=3 SEEDS=1 ADAPT=photometric SCENES=room:301 THREADS=2 UMVS=" +
-                                   test::umvs_binary() + " bash " + UMVS_SOURCE_DIR + "/scripts/judge_audit.sh " +
-                                   work);
+  const std::string command = "STEPS=3 SEEDS=1 ADAPT=photometric SCENES=room:301 THREADS=2 UMVS=" +
+                              test::umvs_binary() + " bash " + UMVS_SOURCE_DIR + "/scripts/judge_audit.sh " + work;
+  const test::Result r = run_shell(command);
   ASSERT_EQ(r.status, 0) << r.output;
 
   // | room 301, photometric, seed 1 | e0 / r0 / w0 -> e1 / r1 / w1 | depth | p0 -> p1 | c0% -> c1% | rule |
@@ -57,6 +57,17 @@ TEST(JudgeAuditScript, ARunGivesTheRulesVerdictAndTheGroundTruthItNeverSaw) {
   const std::string train_log = test::file_bytes(work + "/ft/room_301_photometric_seed1.log");
   EXPECT_NE(train_log.find("no ground truth"), std::string::npos) << train_log;
   EXPECT_NE(judged_log.find("with ground-truth depth (/camera/depth)"), std::string::npos) << judged_log;
+
+  // A scene rendered with other textures is another scene: the next audit renders it again (and
+  // fine-tunes and scores again) rather than reusing it under this audit's name.
+  EXPECT_EQ(test::file_bytes(work + "/room_301.textures"), "none\n");
+  test::write_bytes(work + "/room_301.textures", "installed\n");
+  const test::Result again = run_shell(command);
+  ASSERT_EQ(again.status, 0) << again.output;
+  EXPECT_NE(again.output.find("was rendered with other textures than 'none': rendering it again"), std::string::npos)
+      << again.output;
+  EXPECT_EQ(test::file_bytes(work + "/room_301.textures"), "none\n");
+  EXPECT_TRUE(std::regex_search(again.output, row)) << again.output;
 }
 
 }  // namespace
