@@ -77,18 +77,19 @@ TEST(BlendWeights, EveryParameterAndStatisticIsTheWeightedMeanAndCountersStay) {
 }
 
 TEST(BlendWeights, ShareOneKeepsTheModelAndShareZeroGivesTheStart) {
-  MvsNet adapted = small_model(1), start = small_model(2), other = small_model(1);
+  MvsNet adapted = small_model(1), start = small_model(2), same = small_model(1);
+  const auto original = adapted->named_parameters();
+  const auto kept = copies(original);
   blend_weights(adapted, start, 1.0);
-  for (const auto& p : adapted->named_parameters()) {
-    EXPECT_TRUE(torch::equal(p.value(), other->named_parameters()[p.key()])) << p.key();
+  for (size_t i = 0; i < original.size(); ++i) EXPECT_TRUE(torch::equal(original[i].value(), kept[i])) << original[i].key();
+  blend_weights(same, same, 0.3);  // with itself: itself
+  const auto same_params = same->named_parameters();
+  for (size_t i = 0; i < same_params.size(); ++i) {
+    EXPECT_TRUE(torch::equal(same_params[i].value(), kept[i])) << same_params[i].key();
   }
   blend_weights(adapted, start, 0.0);
   for (const auto& p : adapted->named_parameters()) {
     EXPECT_TRUE(torch::equal(p.value(), start->named_parameters()[p.key()])) << p.key();
-  }
-  blend_weights(other, other, 0.3);  // with itself: itself
-  for (const auto& p : other->named_parameters()) {
-    EXPECT_TRUE(torch::allclose(p.value(), small_model(1)->named_parameters()[p.key()])) << p.key();
   }
 }
 
@@ -117,10 +118,11 @@ TEST(TrainFineTunedShare, ARunWritesTheBlendOfItsBestModelAndItsInit) {
   const test::Result no_init = test::run_umvs("train --data " + data + " --width 96 --height 64 --num-depth 8 "
                                               "--views-loss 3 --top-k 2 --steps 2 --fine-tuned-share 0.5 --out " + dir + "/a");
   EXPECT_EQ(no_init.status, 2) << no_init.output;
-  EXPECT_TRUE(test::contains(no_init.output, "give init")) << no_init.output;
+  EXPECT_TRUE(test::contains(no_init.output, "--fine-tuned-share blends best.pt with the model the run starts from: "
+                                               "give --init")) << no_init.output;
   const test::Result zero = test::run_umvs(common + " --fine-tuned-share 0 --out " + dir + "/b");
   EXPECT_EQ(zero.status, 2) << zero.output;
-  EXPECT_TRUE(test::contains(zero.output, "fine_tuned_share must be in (0, 1]")) << zero.output;
+  EXPECT_TRUE(test::contains(zero.output, "--fine-tuned-share must be in (0, 1] (1 = no blend), got 0")) << zero.output;
   EXPECT_FALSE(fs::exists(dir + "/a") || fs::exists(dir + "/b"));
 
   const test::Result r = test::run_umvs(common + " --fine-tuned-share 0.5 --out " + dir + "/run");
@@ -138,9 +140,13 @@ TEST(TrainFineTunedShare, ARunWritesTheBlendOfItsBestModelAndItsInit) {
   EXPECT_GT(changed, 0) << "two steps changed no weight: the test proves nothing";
   EXPECT_TRUE(blended.meta.optimizer_state.empty()) << "the blend carries best.pt's optimiser state";
 
-  // Without the option no blend is written (the default).
+  // Without the option no blend is written (the default), and replacing the run leaves no blend of
+  // the old one behind.
   ASSERT_EQ(test::run_umvs(common + " --out " + dir + "/plain").status, 0);
   EXPECT_FALSE(fs::exists(dir + "/plain/blended.pt"));
+  ASSERT_EQ(test::run_umvs(common + " --overwrite --out " + dir + "/run").status, 0);
+  EXPECT_TRUE(fs::exists(dir + "/run/best.pt"));
+  EXPECT_FALSE(fs::exists(dir + "/run/blended.pt")) << "--overwrite kept the replaced run's blend";
 }
 
 }  // namespace

@@ -126,6 +126,13 @@ void check_training_options(const umvs::Args& args) {
     }
     return;
   }
+  const double share = args.real("fine-tuned-share");
+  if (!(share > 0 && share <= 1)) {
+    throw std::invalid_argument("--fine-tuned-share must be in (0, 1] (1 = no blend), got " + args.str("fine-tuned-share"));
+  }
+  if (share < 1 && args.str("init").empty()) {
+    throw std::invalid_argument("--fine-tuned-share blends best.pt with the model the run starts from: give --init");
+  }
   if (args.str("out").empty()) throw std::invalid_argument("--out is required for training");
   if (args.on("resume") && args.on("overwrite")) {
     throw std::invalid_argument("--resume continues the run in --out, --overwrite replaces it: give one of them");
@@ -249,7 +256,7 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
               "--init's (weight-space interpolation toward the starting model; the trainer node's ~fine_tuned_share, "
               "docs/results.md); 1 = off")
       .flag("resume", "continue exactly from OUT/last.pt (with the options of OUT/run_config.txt)")
-      .flag("overwrite", "replace the run in a non-empty OUT (its last.pt, best.pt, log, curve, run_config.txt)")
+      .flag("overwrite", "replace the run in a non-empty OUT (its last.pt, best.pt, blended.pt, log, curve, run_config.txt)")
       .option("eval-only", "", "evaluate this checkpoint on --data and exit")
       .option("against", "",
               "with --eval-only: also evaluate this (served) checkpoint on the same data and say whether the "
