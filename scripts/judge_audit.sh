@@ -11,7 +11,8 @@
 #
 # Usage: scripts/judge_audit.sh [WORK_DIR]
 #   environment: UMVS, THREADS (2), STEPS (150), SEEDS ("1 2": --seed of each fine-tuning run),
-#                ADAPT ("photometric self"; also "aggressive", 10x the learning rate),
+#                ADAPT ("photometric self"; also "anchored", self-training with --anchor-unconfirmed,
+#                and "aggressive", 10x the learning rate),
 #                SCENES ("room:301 facade:302 dtu_like:303": `umvs synth` recipe:seed),
 #                SERVED (models/unsup_mvsnet.pt),
 #                TEXTURES ("none": procedural, the same scenes on every machine; "installed" renders
@@ -39,8 +40,9 @@ adapt_args() {
   case "$1" in
     photometric) echo "" ;;
     self) echo "--self-training-every 25" ;;
+    anchored) echo "--self-training-every 25 --anchor-unconfirmed" ;;
     aggressive) echo "--lr 1e-2" ;;
-    *) echo "unknown adaptation '$1' (photometric | self | aggressive)" >&2; return 1 ;;
+    *) echo "unknown adaptation '$1' (photometric | self | anchored | aggressive)" >&2; return 1 ;;
   esac
 }
 

@@ -354,6 +354,88 @@ TEST(SelfTraining, PseudoLabelsAreTheAccuratePixels) {
       << "labels abs rel " << label_abs_rel << " vs the model elsewhere " << elsewhere_abs_rel;
 }
 
+TEST(SelfTraining, AnchoredLabelsKeepTheStartDepthWhereNoViewConfirms) {
+  // With the start model's depth maps, every depth-grid pixel gets a label: the confirmed depth
+  // where views agree (the same labels as without), the start depth everywhere else.
+  const std::string dir = write_room("anchored_labels", 42, false);
+  TupleConfig cfg = room_tuples(4);
+  cfg.read_ground_truth = false;
+  const auto tuples = fixed_tuples(MvsFolderSource({dir}, cfg), 0);
+  auto model = load_model(default_model(), torch::kCPU).model;
+  FusionConfig rule;
+  rule.min_confidence = 0.5;
+  rule.max_relative_depth = 0.03;
+  rule.min_agreeing_views = 2;
+  const auto start = reference_depths(model, tuples, 32, torch::kCPU);
+  ASSERT_EQ(start.size(), tuples.size());
+  const auto plain = pseudo_labelled_tuples(model, tuples, 32, rule, torch::kCPU);
+  const auto anchored = pseudo_labelled_tuples(model, tuples, 32, rule, torch::kCPU, nullptr, &start);
+  ASSERT_EQ(anchored.size(), tuples.size());
+  int64_t confirmed = 0, unconfirmed = 0;
+  for (size_t i = 0; i < tuples.size(); ++i) {
+    const auto grid = [](const torch::Tensor& full) { return full.slice(0, 0, full.size(0), 4).slice(1, 0, full.size(1), 4); };
+    const auto p = grid(plain[i].depth_gt), a = grid(anchored[i].depth_gt);
+    ASSERT_EQ(a.sizes(), start[i].sizes());
+    const auto is_confirmed = p > 0;
+    EXPECT_TRUE(torch::equal(a.masked_select(is_confirmed), p.masked_select(is_confirmed))) << tuples[i].name;
+    EXPECT_TRUE(torch::equal(a.masked_select(~is_confirmed), start[i].masked_select(~is_confirmed))) << tuples[i].name;
+    EXPECT_TRUE((a > 0).all().item<bool>()) << "an anchored label map has no hole";
+    // Off the depth grid nothing is labelled, as without anchors.
+    EXPECT_EQ(anchored[i].depth_gt.gt(0).sum().item<int64_t>(), a.numel());
+    confirmed += is_confirmed.sum().item<int64_t>();
+    unconfirmed += (~is_confirmed).sum().item<int64_t>();
+  }
+  EXPECT_GT(confirmed, 100);  // both kinds of pixel were checked
+  EXPECT_GT(unconfirmed, 100);
+  // One map per tuple, of the reference's depth size.
+  std::vector<torch::Tensor> short_list(start.begin(), start.end() - 1);
+  EXPECT_THROW(pseudo_labelled_tuples(model, tuples, 32, rule, torch::kCPU, nullptr, &short_list), std::invalid_argument);
+  std::vector<torch::Tensor> wrong_size = start;
+  wrong_size[0] = torch::ones({3, 3});
+  EXPECT_THROW(pseudo_labelled_tuples(model, tuples, 32, rule, torch::kCPU, nullptr, &wrong_size), std::invalid_argument);
+}
+
+TEST(SelfTraining, AnchoredRunKeepsItsStartModelAndResumesWithinARoundExactly) {
+  const std::string data = write_room("anchored_run", 52, false);
+  const std::string out = test::temp_dir("anchored_run_out");
+  std::filesystem::remove_all(out);
+  const std::string common = " --data " + data + " --init " + default_model() +
+                             " --width 64 --height 64 --num-depth 16 --views-loss 4 --top-k 2"
+                             " --save-every 2 --threads 1 --seed 3";
+  const std::string anchored = "--self-training-every 3 --anchor-unconfirmed";
+  const auto train = [&](const std::string& args) {
+    return std::system((test::umvs_binary() + " train" + common + " " + args + " > " + out + ".log 2>&1").c_str());
+  };
+  ASSERT_EQ(train(anchored + " --steps 4 --out " + out + "/whole"), 0) << file_text(out + ".log");
+  EXPECT_NE(file_text(out + ".log").find("anchored self-training"), std::string::npos) << file_text(out + ".log");
+  // Stopped at step 2, inside the round that began at step 0, and resumed: the anchors come from
+  // anchor.pt, and the run ends where the uninterrupted one did.
+  ASSERT_EQ(train(anchored + " --steps 2 --out " + out + "/resumed"), 0) << file_text(out + ".log");
+  ASSERT_EQ(train(anchored + " --steps 4 --resume --out " + out + "/resumed"), 0) << file_text(out + ".log");
+  ASSERT_EQ(train("--self-training-every 3 --steps 4 --out " + out + "/plain"), 0) << file_text(out + ".log");
+  const auto whole = load_model(out + "/whole/last.pt", torch::kCPU).model;
+  const auto resumed = load_model(out + "/resumed/last.pt", torch::kCPU).model;
+  const auto plain = load_model(out + "/plain/last.pt", torch::kCPU).model;
+  const auto anchor = load_model(out + "/whole/anchor.pt", torch::kCPU).model;
+  const auto init = load_model(default_model(), torch::kCPU).model;
+  auto pr = resumed->named_parameters(), pp = plain->named_parameters(), pa = anchor->named_parameters();
+  double plain_differs = 0;
+  for (const auto& p : whole->named_parameters()) {
+    EXPECT_TRUE(torch::equal(p.value(), pr[p.key()])) << p.key();
+    plain_differs += (p.value() - pp[p.key()]).abs().sum().item<double>();
+  }
+  EXPECT_GT(plain_differs, 0.0) << "the anchors changed nothing";
+  for (const auto& p : init->named_parameters()) EXPECT_TRUE(torch::equal(p.value(), pa[p.key()])) << p.key();
+  EXPECT_FALSE(std::filesystem::exists(out + "/plain/anchor.pt"));
+  // Without self-training there is nothing to anchor; a resume that lost anchor.pt is refused.
+  EXPECT_NE(train("--anchor-unconfirmed --steps 2 --out " + out + "/refused"), 0);
+  EXPECT_NE(file_text(out + ".log").find("--self-training-every"), std::string::npos) << file_text(out + ".log");
+  ASSERT_EQ(train(anchored + " --steps 2 --out " + out + "/lost"), 0) << file_text(out + ".log");
+  std::filesystem::remove(out + "/lost/anchor.pt");
+  EXPECT_NE(train(anchored + " --steps 4 --resume --out " + out + "/lost"), 0);
+  EXPECT_NE(file_text(out + ".log").find("anchor.pt"), std::string::npos) << file_text(out + ".log");
+}
+
 TEST(SelfTraining, UmvsTrainReadsNoGroundTruth) {
   // The same self-training run on a folder with depth_gt/ and on a copy without gives the same
   // weights: nothing in it reads ground truth.

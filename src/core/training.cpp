@@ -319,19 +319,31 @@ namespace {
 // Fusion's verdict on a tuple's reference: the reference and each loss view are inferred in turn
 // as the reference (sources: the tuple's other views, reference first), and the reference's
 // depth map is checked against the loss views' maps.
+// The reference and the loss views of a tuple, reference first.
+std::vector<ViewInput> tuple_views(const TrainingTuple& t) {
+  std::vector<ViewInput> views{t.network_views.front()};
+  views.insert(views.end(), t.loss_views.begin(), t.loss_views.end());
+  return views;
+}
+
+// The network's input with views[i] as the reference: its sources are the other views in order,
+// as many as the tuple's network views have.
+std::vector<ViewInput> input_with_reference(const TrainingTuple& t, const std::vector<ViewInput>& views, size_t i) {
+  const size_t sources_per_view = t.network_views.size() - 1;
+  std::vector<ViewInput> input{views[i]};
+  for (size_t j = 0; j < views.size() && input.size() <= sources_per_view; ++j) {
+    if (j != i) input.push_back(views[j]);
+  }
+  return input;
+}
+
 DepthFusion::Agreement reference_agreement(DepthEstimator& estimator, const TrainingTuple& t,
                                            const FusionConfig& fusion) {
   t.validate();
-  std::vector<ViewInput> views{t.network_views.front()};
-  views.insert(views.end(), t.loss_views.begin(), t.loss_views.end());
-  const size_t sources_per_view = t.network_views.size() - 1;
+  const std::vector<ViewInput> views = tuple_views(t);
   std::vector<FusionView> maps;
   for (size_t i = 0; i < views.size(); ++i) {
-    std::vector<ViewInput> input{views[i]};
-    for (size_t j = 0; j < views.size() && input.size() <= sources_per_view; ++j) {
-      if (j != i) input.push_back(views[j]);
-    }
-    const DepthMap m = estimator.estimate(input, t.depth_min, t.depth_max);
+    const DepthMap m = estimator.estimate(input_with_reference(t, views, i), t.depth_min, t.depth_max);
     maps.push_back(FusionView{static_cast<int64_t>(i), m.depth, m.confidence, {}, m.camera});
   }
   FusionConfig config = fusion;
@@ -377,15 +389,34 @@ FusionConfig adaptation_judge_rule() {
   return rule;
 }
 
+std::vector<torch::Tensor> reference_depths(MvsNet& model, const std::vector<TrainingTuple>& tuples, int num_depth,
+                                            const torch::Device& device) {
+  const bool was_training = model->is_training();
+  DepthEstimator estimator = eval_estimator(model, num_depth, device);
+  std::vector<torch::Tensor> depths;
+  for (const auto& t : tuples) {
+    t.validate();
+    depths.push_back(estimator.estimate(input_with_reference(t, tuple_views(t), 0), t.depth_min, t.depth_max).depth);
+  }
+  model->train(was_training);
+  return depths;
+}
+
 std::vector<TrainingTuple> pseudo_labelled_tuples(MvsNet& model, const std::vector<TrainingTuple>& tuples,
                                                   int num_depth, const FusionConfig& fusion,
-                                                  const torch::Device& device, ConsistencyScore* labelled) {
+                                                  const torch::Device& device, ConsistencyScore* labelled,
+                                                  const std::vector<torch::Tensor>* unconfirmed_depth) {
+  if (unconfirmed_depth && unconfirmed_depth->size() != tuples.size()) {
+    throw std::invalid_argument("pseudo_labelled_tuples: " + std::to_string(unconfirmed_depth->size()) +
+                                " depth maps for the unconfirmed pixels of " + std::to_string(tuples.size()) + " tuples");
+  }
   const bool was_training = model->is_training();
   DepthEstimator estimator = eval_estimator(model, num_depth, device);
   std::vector<TrainingTuple> out;
   ConsistencyScore score;
   int64_t confirmed = 0;
-  for (const auto& t : tuples) {
+  for (size_t k = 0; k < tuples.size(); ++k) {
+    const TrainingTuple& t = tuples[k];
     const auto agreement = reference_agreement(estimator, t, fusion);
     const int64_t n = agreement.confirmed.sum().item<int64_t>();
     confirmed += n;
@@ -396,7 +427,16 @@ std::vector<TrainingTuple> pseudo_labelled_tuples(MvsNet& model, const std::vect
     const auto& ref = t.network_views.front().camera;
     p.depth_gt = torch::zeros({ref.height, ref.width}, torch::kFloat32);
     const int64_t h = agreement.depth.size(0), w = agreement.depth.size(1);
-    p.depth_gt.slice(0, 0, 4 * h, 4).slice(1, 0, 4 * w, 4).copy_(agreement.depth);
+    torch::Tensor label = agreement.depth;
+    if (unconfirmed_depth) {
+      const torch::Tensor& kept = (*unconfirmed_depth)[k];
+      if (kept.sizes() != agreement.depth.sizes()) {
+        throw std::invalid_argument("pseudo_labelled_tuples: the unconfirmed pixels' depth map of " + t.name +
+                                    " has another size than the reference's depth map");
+      }
+      label = torch::where(agreement.confirmed, agreement.depth, kept.to(agreement.depth.device()));
+    }
+    p.depth_gt.slice(0, 0, 4 * h, 4).slice(1, 0, 4 * w, 4).copy_(label);
     p.supervised = true;
     p.name = t.name + " (pseudo-labelled)";
     out.push_back(std::move(p));

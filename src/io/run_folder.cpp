@@ -14,8 +14,8 @@ namespace umvs {
 namespace fs = std::filesystem;
 
 const std::vector<std::string>& run_files() {
-  static const std::vector<std::string> files = {"last.pt", "best.pt", "blended.pt", "train_log.csv", "loss_curve.png",
-                                                 kRunConfigFile};
+  static const std::vector<std::string> files = {"last.pt", "best.pt", "blended.pt", "anchor.pt",
+                                                 "train_log.csv", "loss_curve.png", kRunConfigFile};
   return files;
 }
 

@@ -23,6 +23,7 @@ namespace fs = std::filesystem;
 namespace {
 
 constexpr const char* kRoundStartFile = "round_start.pt";
+constexpr const char* kAnchorFile = "anchor.pt";
 
 TrainLogRow log_row(int64_t step, const LossValues& loss, double lr, double seconds) {
   TrainLogRow row;
@@ -112,6 +113,9 @@ void TrainingRunConfig::validate() const {
                                 std::to_string(data.views_loss));
   }
   if (self_training_every > 0) label_rule.validate();
+  if (anchor_unconfirmed && self_training_every == 0) {
+    throw std::invalid_argument("anchor_unconfirmed labels self-training's unconfirmed pixels: it needs self_training_every > 0");
+  }
   if (!(fine_tuned_share > 0 && fine_tuned_share <= 1)) {
     throw std::invalid_argument("fine_tuned_share must be in (0, 1] (1 = no blend), got " + std::to_string(fine_tuned_share));
   }
@@ -329,9 +333,24 @@ std::vector<TrainingTuple> TrainingRun::next_tuples() {
 void TrainingRun::label_round(MvsNet& labeller) {
   ConsistencyScore score;
   pseudo_->replace(pseudo_labelled_tuples(labeller, to_label_, config_.trainer.num_depth, config_.label_rule,
-                                          config_.device, &score));
+                                          config_.device, &score, anchor_depth_.empty() ? nullptr : &anchor_depth_));
   messages_ << "\nself-training round at step " << step_ << ": " << 100.0 * score.confirmed_fraction
             << "% of the reference pixels of " << score.tuples << " tuples confirmed by other views\n";
+}
+
+void TrainingRun::prepare_anchor() {
+  const std::string path = config_.out + "/" + kAnchorFile;
+  MvsNet anchor{nullptr};
+  if (step_ == 0) {
+    anchor = trainer_->model();
+    CheckpointMeta m;
+    if (writes_files()) save_checkpoint(path, anchor, m);
+  } else {  // resumed: the model of step 0, as the run kept it
+    if (!fs::exists(path)) throw std::runtime_error("--resume: " + path + " (anchored self-training) is missing");
+    anchor = load_model(path, config_.device).model;
+  }
+  anchor_depth_ = reference_depths(anchor, to_label_, config_.trainer.num_depth, config_.device);
+  messages_ << "anchored self-training: the pixels no view confirms keep the depth of step 0\n";
 }
 
 void TrainingRun::write_curve() const {
@@ -390,6 +409,7 @@ TrainingRun::Result TrainingRun::run(
   // A self-training round starts at every multiple of `every`: its labels come from the model at
   // that step (round_start.pt keeps it, so that a resumed run labels exactly alike).
   const std::string round_path = out + "/" + kRoundStartFile;
+  if (config_.anchor_unconfirmed) prepare_anchor();
   if (every > 0 && step_ % every != 0) {  // resumed within a round
     if (!fs::exists(round_path)) throw std::runtime_error("--resume: " + round_path + " is missing");
     auto round_model = load_model(round_path, config_.device);

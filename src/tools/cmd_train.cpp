@@ -256,7 +256,7 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
               "--init's (weight-space interpolation toward the starting model; the trainer node's ~fine_tuned_share, "
               "docs/results.md); 1 = off")
       .flag("resume", "continue exactly from OUT/last.pt (with the options of OUT/run_config.txt)")
-      .flag("overwrite", "replace the run in a non-empty OUT (its last.pt, best.pt, blended.pt, log, curve, run_config.txt)")
+      .flag("overwrite", "replace the run in a non-empty OUT (its last.pt, best.pt, blended.pt, anchor.pt, log, curve, run_config.txt)")
       .option("eval-only", "", "evaluate this checkpoint on --data and exit")
       .option("against", "",
               "with --eval-only: also evaluate this (served) checkpoint on the same data and say whether the "
@@ -275,6 +275,9 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
       .option("label-min-confidence", "0.5", "self-training: confidence a labelled pixel needs")
       .option("label-max-relative-depth", "0.03", "self-training: relative depth agreement with the other views")
       .option("label-min-views", "2", "self-training: other views that must agree")
+      .flag("anchor-unconfirmed",
+            "self-training: label the pixels no view confirms with the starting model's depth (kept as "
+            "OUT/anchor.pt), so that adaptation changes what other views can check and keeps the rest")
       .option("min-gain", "1", "exposure augmentation: lowest gain applied to a whole tuple (log-uniform draw)")
       .option("max-gain", "1", "exposure augmentation: highest gain (clipped at white)")
       .option("input-normalization", "per_image_channel",
@@ -367,6 +370,8 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
                                   "ground truth (--loss supervised, --supervised-data, --depth-topic)");
     }
     data_cfg.read_ground_truth = false;  // label-free, also where the folders have depth_gt/
+  } else if (args.on("anchor-unconfirmed")) {
+    throw std::invalid_argument("--anchor-unconfirmed labels self-training's unconfirmed pixels: give --self-training-every N");
   }
   const bool augment = args.integer("augment") != 0;
   if (!augment) data_cfg.max_zoom = 1.0;
@@ -458,6 +463,7 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
   run.label_rule.min_confidence = args.real("label-min-confidence");
   run.label_rule.max_relative_depth = args.real("label-max-relative-depth");
   run.label_rule.min_agreeing_views = args.integer("label-min-views");
+  run.anchor_unconfirmed = args.on("anchor-unconfirmed");
   run.device = device;
   run.distributed = distributed;
   run.options["world-size"] = std::to_string(distributed.world_size);  // the job's size, however it was given

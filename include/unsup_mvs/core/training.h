@@ -177,9 +177,17 @@ FusionConfig adaptation_judge_rule();
 // (several views agree within the fusion thresholds, confident), as depth_gt on the input grid
 // (0 elsewhere), marked supervised; one output per input tuple (one without a confirmed pixel
 // teaches nothing). The tuples' own depth_gt, if any, is never read. `labelled` (optional) receives the confirmed share.
+// `unconfirmed_depth` (optional, one map per tuple, reference_depths' size): the label of every
+// pixel no view confirms, e.g. the depth of the model a run started from, so that self-training
+// keeps the depth it cannot check where it was (anchored self-training).
 std::vector<TrainingTuple> pseudo_labelled_tuples(MvsNet& model, const std::vector<TrainingTuple>& tuples,
                                                   int num_depth, const FusionConfig& fusion,
-                                                  const torch::Device& device, ConsistencyScore* labelled = nullptr);
+                                                  const torch::Device& device, ConsistencyScore* labelled = nullptr,
+                                                  const std::vector<torch::Tensor>* unconfirmed_depth = nullptr);
+
+// Each tuple's reference depth map as `model` infers it for depth_consistency (eval mode, no gradients).
+std::vector<torch::Tensor> reference_depths(MvsNet& model, const std::vector<TrainingTuple>& tuples, int num_depth,
+                                            const torch::Device& device);
 
 // LibTorch's default CPU generator state as bytes and back (exact resume).
 std::string torch_rng_state();

@@ -49,6 +49,10 @@ struct TrainingRunConfig {
   int self_training_every = 0;
   int pseudo_label_tuples = 0;           // tuples labelled per round (0 = all)
   FusionConfig label_rule;
+  // Anchored self-training: the pixels no view confirms are labelled with the depth of the model
+  // the run started from (kept as OUT/anchor.pt), so that a round trains what other views can
+  // check and keeps the rest where it was. Needs self_training_every > 0.
+  bool anchor_unconfirmed = false;
   // < 1 (needs init): at the end of the run also write OUT/blended.pt, this share of best.pt's
   // weights plus the rest of init's (core/weight_blend.h); 1 = off.
   double fine_tuned_share = 1.0;
@@ -96,6 +100,7 @@ class TrainingRun {
   Evaluation validate();                        // on val_tuples_, shared out over the ranks
   std::vector<TrainingTuple> next_tuples();     // this rank's share of the next step
   void label_round(MvsNet& labeller);
+  void prepare_anchor();                        // anchor_depth_, from anchor.pt (written at step 0)
   void write_curve() const;
   void write_blended();
 
@@ -107,6 +112,7 @@ class TrainingRun {
   std::unique_ptr<MixedSampler> sampler_;
   std::unique_ptr<TupleList> pseudo_;           // self-training labels
   std::vector<TrainingTuple> to_label_, val_tuples_;
+  std::vector<torch::Tensor> anchor_depth_;     // anchored self-training: to_label_'s start depth
   std::vector<TrainLogRow> history_;            // the log up to step_
   int64_t step_ = 0;
   double best_ = 0;
