@@ -427,6 +427,10 @@ TEST(SelfTraining, AnchoredRunKeepsItsStartModelAndResumesWithinARoundExactly) {
   EXPECT_GT(plain_differs, 0.0) << "the anchors changed nothing";
   for (const auto& p : init->named_parameters()) EXPECT_TRUE(torch::equal(p.value(), pa[p.key()])) << p.key();
   EXPECT_FALSE(std::filesystem::exists(out + "/plain/anchor.pt"));
+  // A run that replaces it in its folder takes its anchor (and its round's labeller) away.
+  ASSERT_EQ(train("--steps 1 --overwrite --out " + out + "/whole"), 0) << file_text(out + ".log");
+  EXPECT_FALSE(std::filesystem::exists(out + "/whole/anchor.pt"));
+  EXPECT_FALSE(std::filesystem::exists(out + "/whole/round_start.pt"));
   // Without self-training there is nothing to anchor; a resume that lost anchor.pt is refused.
   EXPECT_NE(train("--anchor-unconfirmed --steps 2 --out " + out + "/refused"), 0);
   EXPECT_NE(file_text(out + ".log").find("--self-training-every"), std::string::npos) << file_text(out + ".log");

@@ -14,7 +14,7 @@ namespace umvs {
 namespace fs = std::filesystem;
 
 const std::vector<std::string>& run_files() {
-  static const std::vector<std::string> files = {"last.pt", "best.pt", "blended.pt", "anchor.pt",
+  static const std::vector<std::string> files = {"last.pt", "best.pt", "blended.pt", "round_start.pt", "anchor.pt",
                                                  "train_log.csv", "loss_curve.png", kRunConfigFile};
   return files;
 }

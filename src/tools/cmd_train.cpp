@@ -256,7 +256,7 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
               "--init's (weight-space interpolation toward the starting model; the trainer node's ~fine_tuned_share, "
               "docs/results.md); 1 = off")
       .flag("resume", "continue exactly from OUT/last.pt (with the options of OUT/run_config.txt)")
-      .flag("overwrite", "replace the run in a non-empty OUT (its last.pt, best.pt, blended.pt, anchor.pt, log, curve, run_config.txt)")
+      .flag("overwrite", "replace the run in a non-empty OUT (its last.pt, best.pt, blended.pt, round_start.pt, anchor.pt, log, curve, run_config.txt)")
       .option("eval-only", "", "evaluate this checkpoint on --data and exit")
       .option("against", "",
               "with --eval-only: also evaluate this (served) checkpoint on the same data and say whether the "
