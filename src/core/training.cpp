@@ -316,9 +316,6 @@ double Trainer::learning_rate() const {
 
 namespace {
 
-// Fusion's verdict on a tuple's reference: the reference and each loss view are inferred in turn
-// as the reference (sources: the tuple's other views, reference first), and the reference's
-// depth map is checked against the loss views' maps.
 // The reference and the loss views of a tuple, reference first.
 std::vector<ViewInput> tuple_views(const TrainingTuple& t) {
   std::vector<ViewInput> views{t.network_views.front()};
@@ -337,6 +334,9 @@ std::vector<ViewInput> input_with_reference(const TrainingTuple& t, const std::v
   return input;
 }
 
+// Fusion's verdict on a tuple's reference: the reference and each loss view are inferred in turn
+// as the reference (sources: the tuple's other views, reference first), and the reference's
+// depth map is checked against the loss views' maps.
 DepthFusion::Agreement reference_agreement(DepthEstimator& estimator, const TrainingTuple& t,
                                            const FusionConfig& fusion) {
   t.validate();
