@@ -2,6 +2,7 @@
 #include <torch/torch.h>
 
 #include <algorithm>
+#include <cmath>
 
 #include "test_util.h"
 #include "unsup_mvs/core/synth.h"
@@ -40,6 +41,42 @@ TEST(Synth, SameSeedGivesIdenticalScenes) {
   EXPECT_FALSE(torch::equal(render_synthetic_scene(other).views[0].image, a.views[0].image));
   EXPECT_GT(a.depth_min, 0.0);
   EXPECT_GT(a.depth_max, a.depth_min);
+}
+
+// A path seed is another pass through the same scene: new camera poses, but the same surfaces, so
+// each new view's ground-truth depth agrees with the first pass's wherever both see a point.
+TEST(Synth, PathSeedGivesAnotherPathThroughTheSameScene) {
+  const SynthConfig first = small_room(true);
+  SynthConfig second = first;
+  second.path_seed = 77;
+  const SynthScene a = render_synthetic_scene(first);
+  const SynthScene b = render_synthetic_scene(second);
+  EXPECT_TRUE(torch::equal(render_synthetic_scene(second).views[0].image, b.views[0].image));
+  ASSERT_EQ(b.views.size(), a.views.size());
+  const Camera& ca = a.views[0].camera;
+  const Camera& cb = b.views[0].camera;
+  const double moved = (ca.center() - cb.center()).norm();
+  EXPECT_GT(moved, 0.01) << "the second pass starts where the first did";
+  // Points of the second pass's first view, moved into the first pass's first view: where they
+  // land in front of the first view's surface, the depths agree (same geometry).
+  auto db = b.views[0].depth.accessor<float, 2>();
+  auto da = a.views[0].depth.accessor<float, 2>();
+  int compared = 0, agreed = 0;
+  for (int y = 0; y < cb.height; y += 4) {
+    for (int x = 0; x < cb.width; x += 4) {
+      const double d = db[y][x];
+      if (d <= 0) continue;
+      Eigen::Vector2d uv;
+      double z = 0.0;
+      if (!ca.project(cb.backproject(x, y, d), &uv, &z)) continue;
+      const long u = std::lround(uv.x()), v = std::lround(uv.y());
+      if (u < 0 || v < 0 || u >= ca.width || v >= ca.height || da[v][u] <= 0) continue;
+      ++compared;
+      agreed += std::abs(da[v][u] - z) < 0.02 * z;
+    }
+  }
+  ASSERT_GT(compared, 200) << "the two passes see too little of the same scene";
+  EXPECT_GT(static_cast<double>(agreed) / compared, 0.7) << agreed << " of " << compared;
 }
 
 // Every pixel of view `ref` is moved into view `src` with its ground-truth depth. Where it lands

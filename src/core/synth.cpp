@@ -76,6 +76,45 @@ std::vector<Camera> plan_robot_path(const SceneDef& scene, const SynthConfig& cf
   return cams;
 }
 
+// Another pass along a recipe's fixed path (orbit and forward paths draw nothing from the seed):
+// the views fall between the first pass's, inside the recipe's span, a little to the side and
+// higher or lower, so that they see the same surfaces from new viewpoints. Drive, turn and random
+// paths differ by the seed alone.
+CameraPlan another_pass(const SceneDef& scene, int num_views, Rng& rng) {
+  CameraPlan c = scene.cameras;
+  // Trim the span's start by `head` and its end by `tail` (fractions of it, half a view spacing
+  // in all), so that the views sit between the recipe's views and never beyond its ends.
+  const double spacing = 1.0 / std::max(1, num_views - 1);
+  const double head = rng.uniform(0.1, 0.4) * spacing, tail = 0.5 * spacing - head;
+  c.orbit_azimuth_deg += 0.5 * (head - tail) * c.orbit_span_deg;
+  c.orbit_span_deg *= 1.0 - head - tail;
+  c.orbit_radius *= rng.uniform(0.9, 1.1);
+  c.orbit_elevation_deg += rng.uniform(-4.0, 4.0);
+  const Vec3 along = c.path_end - c.path_start;
+  c.path_start += head * along;
+  c.path_end -= tail * along;
+  const Vec3 side = Vec3(-along.y(), along.x(), 0.0).normalized();
+  auto eyes_in_solids = [&](const Vec3& shift) {
+    int n = 0;
+    for (int i = 0; i < num_views; ++i) {
+      const double f = num_views > 1 ? static_cast<double>(i) / (num_views - 1) : 0.5;
+      n += inside_any(scene.prims, c.path_start + shift + f * (c.path_end - c.path_start), c.clearance);
+    }
+    return n;
+  };
+  // Sideways and up or down only where that puts no more eyes into furniture than the trimmed path.
+  const int trimmed = eyes_in_solids(Vec3::Zero());
+  for (int attempt = 0; attempt < 20; ++attempt) {
+    const Vec3 shift = rng.uniform(-0.05, 0.05) * along.norm() * side + Vec3(0, 0, rng.uniform(-0.02, 0.02) * along.norm());
+    if (eyes_in_solids(shift) <= trimmed) {
+      c.path_start += shift;
+      c.path_end += shift;
+      break;
+    }
+  }
+  return c;
+}
+
 std::vector<Camera> plan_cameras(const SceneDef& scene, const SynthConfig& cfg, SynthTrajectory traj, Rng& rng) {
   if (traj == SynthTrajectory::kDrive || traj == SynthTrajectory::kTurn) return plan_robot_path(scene, cfg, traj, rng);
   const CameraPlan& c = scene.cameras;
@@ -337,7 +376,10 @@ SynthScene render_synthetic_scene(const SynthConfig& config) {
     case SynthSceneType::kCorridor: def = corridor_scene(layout_rng); break;
   }
   const SynthTrajectory traj = config.trajectory == SynthTrajectory::kDefault ? def.natural : config.trajectory;
-  Rng camera_rng(config.seed * 31 + 7), light_rng(config.seed * 131 + 17);
+  Rng camera_rng(config.path_seed.value_or(config.seed) * 31 + 7), light_rng(config.seed * 131 + 17);
+  if (config.path_seed && traj != SynthTrajectory::kDrive && traj != SynthTrajectory::kTurn) {
+    def.cameras = another_pass(def, config.num_views, camera_rng);
+  }
   const std::vector<Camera> cams = plan_cameras(def, config, traj, camera_rng);
   const PhotoTextureBank photos(config.photo_textures);
   assign_photo_textures(&def, config, photos);

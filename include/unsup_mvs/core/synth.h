@@ -21,6 +21,7 @@
 #include <torch/types.h>
 
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -40,6 +41,9 @@ enum class SynthTrajectory { kDefault, kOrbit, kForward, kRandom, kDrive, kTurn 
 struct SynthConfig {
   SynthSceneType scene = SynthSceneType::kRoom;
   uint64_t seed = 1;             // scene layout, textures, lighting and random trajectories
+  // Another pass through the same scene under the same lights (e.g. to judge an adaptation on
+  // images it never saw): the camera path alone is drawn from it. Unset = the recipe's path.
+  std::optional<uint64_t> path_seed;
   int num_views = 10;
   int width = 320, height = 256;
   // kDefault: kOrbit for kDtuLike, kForward for kRoom and kFacade, kDrive for kCorridor.
