@@ -402,7 +402,7 @@ TEST(SelfTraining, AnchoredRunKeepsItsStartModelAndResumesWithinARoundExactly) {
   const std::string common = " --data " + data + " --init " + default_model() +
                              " --width 64 --height 64 --num-depth 16 --views-loss 4 --top-k 2"
                              " --save-every 2 --threads 1 --seed 3";
-  const std::string anchored = "--self-training-every 3 --anchor-unconfirmed";
+  const std::string anchored = "--self-training-every 3";  // anchored by default
   const auto train = [&](const std::string& args) {
     return std::system((test::umvs_binary() + " train" + common + " " + args + " > " + out + ".log 2>&1").c_str());
   };
@@ -412,7 +412,8 @@ TEST(SelfTraining, AnchoredRunKeepsItsStartModelAndResumesWithinARoundExactly) {
   // anchor.pt, and the run ends where the uninterrupted one did.
   ASSERT_EQ(train(anchored + " --steps 2 --out " + out + "/resumed"), 0) << file_text(out + ".log");
   ASSERT_EQ(train(anchored + " --steps 4 --resume --out " + out + "/resumed"), 0) << file_text(out + ".log");
-  ASSERT_EQ(train("--self-training-every 3 --steps 4 --out " + out + "/plain"), 0) << file_text(out + ".log");
+  ASSERT_EQ(train("--self-training-every 3 --anchor-unconfirmed 0 --steps 4 --out " + out + "/plain"), 0)
+      << file_text(out + ".log");
   const auto whole = load_model(out + "/whole/last.pt", torch::kCPU).model;
   const auto resumed = load_model(out + "/resumed/last.pt", torch::kCPU).model;
   const auto plain = load_model(out + "/plain/last.pt", torch::kCPU).model;
@@ -427,13 +428,29 @@ TEST(SelfTraining, AnchoredRunKeepsItsStartModelAndResumesWithinARoundExactly) {
   EXPECT_GT(plain_differs, 0.0) << "the anchors changed nothing";
   for (const auto& p : init->named_parameters()) EXPECT_TRUE(torch::equal(p.value(), pa[p.key()])) << p.key();
   EXPECT_FALSE(std::filesystem::exists(out + "/plain/anchor.pt"));
+  // Recorded as versions with a default-off flag recorded it, so that their runs still resume:
+  // "1" when anchored, empty for plain self-training and for runs without self-training.
+  EXPECT_NE(file_text(out + "/whole/run_config.txt").find("\nanchor-unconfirmed=1\n"), std::string::npos);
+  EXPECT_NE(file_text(out + "/plain/run_config.txt").find("\nanchor-unconfirmed=\n"), std::string::npos);
+  // So a plain run (or a run of an older version, recorded alike) resumes as it was made, and the
+  // default does not turn it into an anchored one unasked.
+  EXPECT_NE(train("--self-training-every 3 --steps 6 --resume --out " + out + "/plain"), 0);
+  EXPECT_NE(file_text(out + ".log").find("--anchor-unconfirmed: the run in this folder has ''"), std::string::npos)
+      << file_text(out + ".log");
+  EXPECT_EQ(train("--self-training-every 3 --anchor-unconfirmed 0 --steps 6 --resume --out " + out + "/plain"), 0)
+      << file_text(out + ".log");
   // A run that replaces it in its folder takes its anchor (and its round's labeller) away.
   ASSERT_EQ(train("--steps 1 --overwrite --out " + out + "/whole"), 0) << file_text(out + ".log");
   EXPECT_FALSE(std::filesystem::exists(out + "/whole/anchor.pt"));
   EXPECT_FALSE(std::filesystem::exists(out + "/whole/round_start.pt"));
+  EXPECT_NE(file_text(out + "/whole/run_config.txt").find("\nanchor-unconfirmed=\n"), std::string::npos);
   // Without self-training there is nothing to anchor; a resume that lost anchor.pt is refused.
-  EXPECT_NE(train("--anchor-unconfirmed --steps 2 --out " + out + "/refused"), 0);
+  EXPECT_NE(train("--anchor-unconfirmed 1 --steps 2 --out " + out + "/refused"), 0);
   EXPECT_NE(file_text(out + ".log").find("--self-training-every"), std::string::npos) << file_text(out + ".log");
+  EXPECT_NE(train(anchored + " --anchor-unconfirmed 2 --steps 2 --out " + out + "/refused"), 0);
+  EXPECT_NE(file_text(out + ".log").find("--anchor-unconfirmed must be 0 or 1"), std::string::npos)
+      << file_text(out + ".log");
+  EXPECT_FALSE(std::filesystem::exists(out + "/refused"));
   ASSERT_EQ(train(anchored + " --steps 2 --out " + out + "/lost"), 0) << file_text(out + ".log");
   std::filesystem::remove(out + "/lost/anchor.pt");
   EXPECT_NE(train(anchored + " --steps 4 --resume --out " + out + "/lost"), 0);

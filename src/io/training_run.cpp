@@ -113,9 +113,6 @@ void TrainingRunConfig::validate() const {
                                 std::to_string(data.views_loss));
   }
   if (self_training_every > 0) label_rule.validate();
-  if (anchor_unconfirmed && self_training_every == 0) {
-    throw std::invalid_argument("anchor_unconfirmed labels self-training's unconfirmed pixels: it needs self_training_every > 0");
-  }
   if (!(fine_tuned_share > 0 && fine_tuned_share <= 1)) {
     throw std::invalid_argument("fine_tuned_share must be in (0, 1] (1 = no blend), got " + std::to_string(fine_tuned_share));
   }
@@ -409,7 +406,7 @@ TrainingRun::Result TrainingRun::run(
   // A self-training round starts at every multiple of `every`: its labels come from the model at
   // that step (round_start.pt keeps it, so that a resumed run labels exactly alike).
   const std::string round_path = out + "/" + kRoundStartFile;
-  if (config_.anchor_unconfirmed) prepare_anchor();
+  if (config_.self_training_every > 0 && config_.anchor_unconfirmed) prepare_anchor();
   if (every > 0 && step_ % every != 0) {  // resumed within a round
     if (!fs::exists(round_path)) throw std::runtime_error("--resume: " + round_path + " is missing");
     auto round_model = load_model(round_path, config_.device);

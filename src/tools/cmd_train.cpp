@@ -275,9 +275,10 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
       .option("label-min-confidence", "0.5", "self-training: confidence a labelled pixel needs")
       .option("label-max-relative-depth", "0.03", "self-training: relative depth agreement with the other views")
       .option("label-min-views", "2", "self-training: other views that must agree")
-      .flag("anchor-unconfirmed",
-            "self-training: label the pixels no view confirms with the starting model's depth (kept as "
-            "OUT/anchor.pt), so that adaptation changes what other views can check and keeps the rest")
+      .option("anchor-unconfirmed", "1",
+              "self-training: 1 = label the pixels no view confirms with the starting model's depth (kept as "
+              "OUT/anchor.pt), so that adaptation changes what other views can check and keeps the rest; "
+              "0 = leave them unlabelled (plain self-training)")
       .option("min-gain", "1", "exposure augmentation: lowest gain applied to a whole tuple (log-uniform draw)")
       .option("max-gain", "1", "exposure augmentation: highest gain (clipped at white)")
       .option("input-normalization", "per_image_channel",
@@ -370,9 +371,11 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
                                   "ground truth (--loss supervised, --supervised-data, --depth-topic)");
     }
     data_cfg.read_ground_truth = false;  // label-free, also where the folders have depth_gt/
-  } else if (args.on("anchor-unconfirmed")) {
+  } else if (args.given("anchor-unconfirmed")) {
     throw std::invalid_argument("--anchor-unconfirmed labels self-training's unconfirmed pixels: give --self-training-every N");
   }
+  const std::string anchor = args.str("anchor-unconfirmed");
+  if (anchor != "0" && anchor != "1") throw std::invalid_argument("--anchor-unconfirmed must be 0 or 1, got '" + anchor + "'");
   const bool augment = args.integer("augment") != 0;
   if (!augment) data_cfg.max_zoom = 1.0;
   data_cfg.validate();
@@ -463,7 +466,10 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
   run.label_rule.min_confidence = args.real("label-min-confidence");
   run.label_rule.max_relative_depth = args.real("label-max-relative-depth");
   run.label_rule.min_agreeing_views = args.integer("label-min-views");
-  run.anchor_unconfirmed = args.on("anchor-unconfirmed");
+  run.anchor_unconfirmed = self_training && anchor == "1";
+  // Recorded as what the run does, as the flag it was before anchoring became the default recorded
+  // it ("1" anchored, "" otherwise), so that the runs of older versions still resume.
+  run.options["anchor-unconfirmed"] = run.anchor_unconfirmed ? "1" : "";
   run.device = device;
   run.distributed = distributed;
   run.options["world-size"] = std::to_string(distributed.world_size);  // the job's size, however it was given

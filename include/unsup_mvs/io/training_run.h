@@ -51,8 +51,11 @@ struct TrainingRunConfig {
   FusionConfig label_rule;
   // Anchored self-training: the pixels no view confirms are labelled with the depth of the model
   // the run started from (kept as OUT/anchor.pt), so that a round trains what other views can
-  // check and keeps the rest where it was. Needs self_training_every > 0.
-  bool anchor_unconfirmed = false;
+  // check and keeps the rest where it was. Only read with self_training_every > 0. On by default:
+  // judged on a second pass through rendered scenes, the reload rule served no anchored model
+  // worse on two of three depth scores (24 runs), and 4 of the 21 plain ones it served were worse
+  // on all three (docs/results.md, 2026-12-03).
+  bool anchor_unconfirmed = true;
   // < 1 (needs init): at the end of the run also write OUT/blended.pt, this share of best.pt's
   // weights plus the rest of init's (core/weight_blend.h); 1 = off.
   double fine_tuned_share = 1.0;
