@@ -377,7 +377,7 @@ SynthScene render_synthetic_scene(const SynthConfig& config) {
   }
   const SynthTrajectory traj = config.trajectory == SynthTrajectory::kDefault ? def.natural : config.trajectory;
   Rng camera_rng(config.path_seed.value_or(config.seed) * 31 + 7), light_rng(config.seed * 131 + 17);
-  if (config.path_seed && traj != SynthTrajectory::kDrive && traj != SynthTrajectory::kTurn) {
+  if (config.path_seed && (traj == SynthTrajectory::kOrbit || traj == SynthTrajectory::kForward)) {
     def.cameras = another_pass(def, config.num_views, camera_rng);
   }
   const std::vector<Camera> cams = plan_cameras(def, config, traj, camera_rng);

@@ -25,7 +25,9 @@ UMVS_COMMAND(synth, "render a synthetic scene with exact ground truth (depth, gt
   args.required("out", "output folder")
       .option("scene", "room", "dtu_like | room | facade | corridor")
       .option("seed", "1", "layout, textures, lights and random trajectories")
-      .option("path-seed", "", "another pass through the same scene: new viewpoints between and beside the first pass's (default: none)")
+      .option("path-seed", "",
+              "another pass through the same scene: new viewpoints between and beside the first pass's "
+              "(default: none)")
       .option("views", "10", "number of views")
       .option("width", "320", "image width in pixels")
       .option("height", "256", "image height in pixels")
@@ -51,10 +53,12 @@ UMVS_COMMAND(synth, "render a synthetic scene with exact ground truth (depth, gt
   const long long seed = std::stoll(args.str("seed"));
   if (seed < 0) throw std::invalid_argument("--seed must not be negative");
   cfg.seed = static_cast<uint64_t>(seed);
-  if (!args.str("path-seed").empty()) {
-    const long long path_seed = std::stoll(args.str("path-seed"));
-    if (path_seed < 0) throw std::invalid_argument("--path-seed must not be negative");
-    cfg.path_seed = static_cast<uint64_t>(path_seed);
+  if (args.given("path-seed")) {
+    const std::string text = args.str("path-seed");
+    if (text.empty() || text.size() > 18 || text.find_first_not_of("0123456789") != std::string::npos) {
+      throw std::invalid_argument("--path-seed must be a non-negative integer, got '" + text + "'");
+    }
+    cfg.path_seed = std::stoull(text);
   }
   cfg.num_views = args.integer("views");
   cfg.width = args.integer("width");
