@@ -412,8 +412,12 @@ TEST(SelfTraining, AnchoredRunKeepsItsStartModelAndResumesWithinARoundExactly) {
   // anchor.pt, and the run ends where the uninterrupted one did.
   ASSERT_EQ(train(anchored + " --steps 2 --out " + out + "/resumed"), 0) << file_text(out + ".log");
   ASSERT_EQ(train(anchored + " --steps 4 --resume --out " + out + "/resumed"), 0) << file_text(out + ".log");
+  // Each round says what the unconfirmed pixels get, and how to leave them free.
+  EXPECT_NE(file_text(out + ".log").find("keep the start model's depth; --anchor-unconfirmed 0"), std::string::npos)
+      << file_text(out + ".log");
   ASSERT_EQ(train("--self-training-every 3 --anchor-unconfirmed 0 --steps 4 --out " + out + "/plain"), 0)
       << file_text(out + ".log");
+  EXPECT_EQ(file_text(out + ".log").find("keep the start model's depth"), std::string::npos) << file_text(out + ".log");
   const auto whole = load_model(out + "/whole/last.pt", torch::kCPU).model;
   const auto resumed = load_model(out + "/resumed/last.pt", torch::kCPU).model;
   const auto plain = load_model(out + "/plain/last.pt", torch::kCPU).model;

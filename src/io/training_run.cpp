@@ -332,7 +332,13 @@ void TrainingRun::label_round(MvsNet& labeller) {
   pseudo_->replace(pseudo_labelled_tuples(labeller, to_label_, config_.trainer.num_depth, config_.label_rule,
                                           config_.device, &score, anchor_depth_.empty() ? nullptr : &anchor_depth_));
   messages_ << "\nself-training round at step " << step_ << ": " << 100.0 * score.confirmed_fraction
-            << "% of the reference pixels of " << score.tuples << " tuples confirmed by other views\n";
+            << "% of the reference pixels of " << score.tuples << " tuples confirmed by other views";
+  // Where few pixels are confirmed (far-apart keyframes), an anchored run barely moves the model:
+  // say so, so that a user knows why and what the other choice is.
+  if (!anchor_depth_.empty())
+    messages_ << " (the other " << 100.0 * (1.0 - score.confirmed_fraction)
+              << "% keep the start model's depth; --anchor-unconfirmed 0 leaves them to the photometric loss)";
+  messages_ << "\n";
 }
 
 void TrainingRun::prepare_anchor() {
