@@ -395,6 +395,41 @@ TEST(SelfTraining, AnchoredLabelsKeepTheStartDepthWhereNoViewConfirms) {
   EXPECT_THROW(pseudo_labelled_tuples(model, tuples, 32, rule, torch::kCPU, nullptr, &wrong_size), std::invalid_argument);
 }
 
+TEST(SelfTraining, AnchorsCanBeLimitedToConfidentPixels) {
+  // reference_depths with a confidence floor keeps the same depth where the model is confident
+  // enough and 0 (no label) elsewhere; a higher floor keeps fewer pixels.
+  const std::string dir = write_room("anchored_confident", 43, false);
+  TupleConfig cfg = room_tuples(4);
+  cfg.read_ground_truth = false;
+  const auto tuples = fixed_tuples(MvsFolderSource({dir}, cfg), 0);
+  auto model = load_model(default_model(), torch::kCPU).model;
+  const auto all = reference_depths(model, tuples, 32, torch::kCPU);
+  int64_t previous_kept = -1;
+  for (const double floor : {0.0, 0.3, 0.6, 0.9}) {
+    const auto kept = reference_depths(model, tuples, 32, torch::kCPU, floor);
+    int64_t n = 0;
+    for (size_t i = 0; i < tuples.size(); ++i) {
+      const auto has = kept[i].gt(0);
+      EXPECT_TRUE(torch::equal(kept[i].masked_select(has), all[i].masked_select(has))) << tuples[i].name;
+      n += has.sum().item<int64_t>();
+    }
+    if (floor == 0.0) {
+      int64_t every = 0;
+      for (const auto& d : all) every += d.numel();
+      EXPECT_EQ(n, every) << "no floor keeps every pixel";
+    } else {
+      EXPECT_LE(n, previous_kept) << floor;
+    }
+    if (floor == 0.9) {
+      int64_t every = 0;
+      for (const auto& d : all) every += d.numel();
+      EXPECT_LT(n, every) << "a 0.9 floor drops the unconfident pixels";
+      EXPECT_GT(n, 0) << "and keeps the confident ones";
+    }
+    previous_kept = n;
+  }
+}
+
 TEST(SelfTraining, AnchoredRunKeepsItsStartModelAndResumesWithinARoundExactly) {
   const std::string data = write_room("anchored_run", 52, false);
   const std::string out = test::temp_dir("anchored_run_out");
@@ -455,6 +490,21 @@ TEST(SelfTraining, AnchoredRunKeepsItsStartModelAndResumesWithinARoundExactly) {
   EXPECT_NE(file_text(out + ".log").find("--anchor-unconfirmed must be 0 or 1"), std::string::npos)
       << file_text(out + ".log");
   EXPECT_FALSE(std::filesystem::exists(out + "/refused"));
+  // A confidence floor for the anchors: only with anchoring, within [0, 1], recorded when set.
+  EXPECT_NE(train("--self-training-every 3 --anchor-unconfirmed 0 --anchor-min-confidence 0.5 --steps 2 --out " + out +
+                  "/refused"),
+            0);
+  EXPECT_NE(file_text(out + ".log").find("--anchor-min-confidence chooses"), std::string::npos) << file_text(out + ".log");
+  EXPECT_NE(train(anchored + " --anchor-min-confidence 1.5 --steps 2 --out " + out + "/refused"), 0);
+  EXPECT_NE(file_text(out + ".log").find("--anchor-min-confidence must be in [0, 1]"), std::string::npos)
+      << file_text(out + ".log");
+  EXPECT_FALSE(std::filesystem::exists(out + "/refused"));
+  ASSERT_EQ(train(anchored + " --anchor-min-confidence 0.5 --steps 1 --out " + out + "/confident"), 0)
+      << file_text(out + ".log");
+  EXPECT_NE(file_text(out + ".log").find("where its confidence is at least 0.5"), std::string::npos)
+      << file_text(out + ".log");
+  EXPECT_NE(file_text(out + "/confident/run_config.txt").find("\nanchor-min-confidence=0.5\n"), std::string::npos);
+  EXPECT_EQ(file_text(out + "/whole/run_config.txt").find("anchor-min-confidence"), std::string::npos);
   ASSERT_EQ(train(anchored + " --steps 2 --out " + out + "/lost"), 0) << file_text(out + ".log");
   std::filesystem::remove(out + "/lost/anchor.pt");
   EXPECT_NE(train(anchored + " --steps 4 --resume --out " + out + "/lost"), 0);

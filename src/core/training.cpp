@@ -390,13 +390,16 @@ FusionConfig adaptation_judge_rule() {
 }
 
 std::vector<torch::Tensor> reference_depths(MvsNet& model, const std::vector<TrainingTuple>& tuples, int num_depth,
-                                            const torch::Device& device) {
+                                            const torch::Device& device, double min_confidence) {
   const bool was_training = model->is_training();
   DepthEstimator estimator = eval_estimator(model, num_depth, device);
   std::vector<torch::Tensor> depths;
   for (const auto& t : tuples) {
     t.validate();
-    depths.push_back(estimator.estimate(input_with_reference(t, tuple_views(t), 0), t.depth_min, t.depth_max).depth);
+    const auto estimate = estimator.estimate(input_with_reference(t, tuple_views(t), 0), t.depth_min, t.depth_max);
+    depths.push_back(min_confidence > 0.0
+                         ? torch::where(estimate.confidence >= min_confidence, estimate.depth, torch::zeros_like(estimate.depth))
+                         : estimate.depth);
   }
   model->train(was_training);
   return depths;

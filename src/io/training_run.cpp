@@ -1,5 +1,6 @@
 #include "unsup_mvs/io/training_run.h"
 
+#include <algorithm>
 #include <exception>
 
 #include <chrono>
@@ -337,7 +338,8 @@ void TrainingRun::label_round(MvsNet& labeller) {
   // say so, so that a user knows why and what the other choice is.
   if (!anchor_depth_.empty())
     messages_ << " (the other " << 100.0 * (1.0 - score.confirmed_fraction)
-              << "% keep the start model's depth; --anchor-unconfirmed 0 leaves them to the photometric loss)";
+              << "% keep the start model's depth" << (config_.anchor_min_confidence > 0.0 ? " where it was confident" : "")
+              << "; --anchor-unconfirmed 0 leaves them to the photometric loss)";
   messages_ << "\n";
 }
 
@@ -352,8 +354,16 @@ void TrainingRun::prepare_anchor() {
     if (!fs::exists(path)) throw std::runtime_error("--resume: " + path + " (anchored self-training) is missing");
     anchor = load_model(path, config_.device).model;
   }
-  anchor_depth_ = reference_depths(anchor, to_label_, config_.trainer.num_depth, config_.device);
-  messages_ << "anchored self-training: the pixels no view confirms keep the depth of step 0\n";
+  anchor_depth_ = reference_depths(anchor, to_label_, config_.trainer.num_depth, config_.device,
+                                   config_.anchor_min_confidence);
+  messages_ << "anchored self-training: the pixels no view confirms keep the depth of step 0";
+  if (config_.anchor_min_confidence > 0.0) {
+    int64_t kept = 0, all = 0;
+    for (const auto& d : anchor_depth_) kept += d.gt(0).sum().item<int64_t>(), all += d.numel();
+    messages_ << " where its confidence is at least " << config_.anchor_min_confidence << " ("
+              << 100.0 * static_cast<double>(kept) / static_cast<double>(std::max<int64_t>(all, 1)) << "% of the reference pixels)";
+  }
+  messages_ << "\n";
 }
 
 void TrainingRun::write_curve() const {

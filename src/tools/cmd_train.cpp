@@ -279,6 +279,9 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
               "self-training: 1 = label the pixels no view confirms with the starting model's depth (kept as "
               "OUT/anchor.pt), so that adaptation changes what other views can check and keeps the rest; "
               "0 = leave them unlabelled (plain self-training)")
+      .option("anchor-min-confidence", "0",
+              "anchored self-training: anchor only the pixels the starting model gave at least this confidence "
+              "(0 = all; the others are left to the photometric loss)")
       .option("min-gain", "1", "exposure augmentation: lowest gain applied to a whole tuple (log-uniform draw)")
       .option("max-gain", "1", "exposure augmentation: highest gain (clipped at white)")
       .option("input-normalization", "per_image_channel",
@@ -376,6 +379,14 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
   }
   const std::string anchor = args.str("anchor-unconfirmed");
   if (anchor != "0" && anchor != "1") throw std::invalid_argument("--anchor-unconfirmed must be 0 or 1, got '" + anchor + "'");
+  const double anchor_min_confidence = args.real("anchor-min-confidence");
+  if (!(anchor_min_confidence >= 0.0 && anchor_min_confidence <= 1.0)) {
+    throw std::invalid_argument("--anchor-min-confidence must be in [0, 1], got " + args.str("anchor-min-confidence"));
+  }
+  if (args.given("anchor-min-confidence") && !(self_training && anchor == "1")) {
+    throw std::invalid_argument("--anchor-min-confidence chooses which pixels anchored self-training anchors: give "
+                                "--self-training-every N (and not --anchor-unconfirmed 0)");
+  }
   const bool augment = args.integer("augment") != 0;
   if (!augment) data_cfg.max_zoom = 1.0;
   data_cfg.validate();
@@ -470,6 +481,10 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
   // Recorded as what the run does, as the flag it was before anchoring became the default recorded
   // it ("1" anchored, "" otherwise), so that the runs of older versions still resume.
   run.options["anchor-unconfirmed"] = run.anchor_unconfirmed ? "1" : "";
+  run.anchor_min_confidence = anchor_min_confidence;
+  // Recorded only when set, so that the runs of versions without it resume.
+  run.options.erase("anchor-min-confidence");
+  if (anchor_min_confidence > 0.0) run.options["anchor-min-confidence"] = args.str("anchor-min-confidence");
   run.device = device;
   run.distributed = distributed;
   run.options["world-size"] = std::to_string(distributed.world_size);  // the job's size, however it was given

@@ -186,8 +186,9 @@ std::vector<TrainingTuple> pseudo_labelled_tuples(MvsNet& model, const std::vect
                                                   const std::vector<torch::Tensor>* unconfirmed_depth = nullptr);
 
 // Each tuple's reference depth map as `model` infers it for depth_consistency (eval mode, no gradients).
+// Pixels whose confidence is below `min_confidence` get 0 (as a label: none); 0 keeps every pixel.
 std::vector<torch::Tensor> reference_depths(MvsNet& model, const std::vector<TrainingTuple>& tuples, int num_depth,
-                                            const torch::Device& device);
+                                            const torch::Device& device, double min_confidence = 0.0);
 
 // LibTorch's default CPU generator state as bytes and back (exact resume).
 std::string torch_rng_state();

@@ -56,6 +56,9 @@ struct TrainingRunConfig {
   // worse on two of three depth scores (24 runs), and 4 of the 21 plain ones it served were worse
   // on all three (docs/results.md, 2026-12-03).
   bool anchor_unconfirmed = true;
+  // Anchor only the pixels the start model gave at least this confidence (0 = all): an unconfident
+  // guess is no depth worth keeping, and where views rarely overlap nearly every pixel is one.
+  double anchor_min_confidence = 0.0;
   // < 1 (needs init): at the end of the run also write OUT/blended.pt, this share of best.pt's
   // weights plus the rest of init's (core/weight_blend.h); 1 = off.
   double fine_tuned_share = 1.0;
