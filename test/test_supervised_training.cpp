@@ -448,7 +448,7 @@ TEST(SelfTraining, AnchoredRunKeepsItsStartModelAndResumesWithinARoundExactly) {
   ASSERT_EQ(train(anchored + " --steps 2 --out " + out + "/resumed"), 0) << file_text(out + ".log");
   ASSERT_EQ(train(anchored + " --steps 4 --resume --out " + out + "/resumed"), 0) << file_text(out + ".log");
   // Each round says what the unconfirmed pixels get, and how to leave them free.
-  EXPECT_NE(file_text(out + ".log").find("keep the start model's depth; --anchor-unconfirmed 0"), std::string::npos)
+  EXPECT_NE(file_text(out + ".log").find("keep the start model's depth (anchored; --anchor-unconfirmed 0"), std::string::npos)
       << file_text(out + ".log");
   ASSERT_EQ(train("--self-training-every 3 --anchor-unconfirmed 0 --steps 4 --out " + out + "/plain"), 0)
       << file_text(out + ".log");

@@ -330,16 +330,20 @@ std::vector<TrainingTuple> TrainingRun::next_tuples() {
 
 void TrainingRun::label_round(MvsNet& labeller) {
   ConsistencyScore score;
-  pseudo_->replace(pseudo_labelled_tuples(labeller, to_label_, config_.trainer.num_depth, config_.label_rule,
-                                          config_.device, &score, anchor_depth_.empty() ? nullptr : &anchor_depth_));
+  auto labelled = pseudo_labelled_tuples(labeller, to_label_, config_.trainer.num_depth, config_.label_rule,
+                                         config_.device, &score, anchor_depth_.empty() ? nullptr : &anchor_depth_);
+  int64_t labels = 0;
+  for (const auto& t : labelled) labels += t.depth_gt.gt(0).sum().item<int64_t>();
+  pseudo_->replace(std::move(labelled));
   messages_ << "\nself-training round at step " << step_ << ": " << 100.0 * score.confirmed_fraction
             << "% of the reference pixels of " << score.tuples << " tuples confirmed by other views";
   // Where few pixels are confirmed (far-apart keyframes), an anchored run barely moves the model:
   // say so, so that a user knows why and what the other choice is.
-  if (!anchor_depth_.empty())
-    messages_ << " (the other " << 100.0 * (1.0 - score.confirmed_fraction)
-              << "% keep the start model's depth" << (config_.anchor_min_confidence > 0.0 ? " where it was confident" : "")
-              << "; --anchor-unconfirmed 0 leaves them to the photometric loss)";
+  if (!anchor_depth_.empty() && score.pixels > 0) {
+    const double anchored = static_cast<double>(labels) / static_cast<double>(score.pixels) - score.confirmed_fraction;
+    messages_ << "; " << 100.0 * anchored
+              << "% keep the start model's depth (anchored; --anchor-unconfirmed 0 leaves them to the photometric loss)";
+  }
   messages_ << "\n";
 }
 
