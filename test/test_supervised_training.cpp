@@ -299,6 +299,15 @@ std::string file_text(const std::string& path) {
 
 std::string default_model() { return std::string(UMVS_SOURCE_DIR) + "/models/unsup_mvsnet.pt"; }
 
+// Every tuple of a rendered room without ground truth (4 loss views, unaugmented), as self-training
+// sees a robot's unlabelled images.
+std::vector<TrainingTuple> unlabelled_room_tuples(const std::string& name, int seed) {
+  const std::string dir = write_room(name, seed, false);
+  TupleConfig cfg = room_tuples(4);
+  cfg.read_ground_truth = false;
+  return fixed_tuples(MvsFolderSource({dir}, cfg), 0);
+}
+
 TEST(SelfTraining, PseudoLabelsAreTheAccuratePixels) {
   // The pixels the views agree on are far more accurate than the model's depth elsewhere: that is
   // what makes them labels. Scored against the rendered ground truth (which labelling never reads).
@@ -357,10 +366,7 @@ TEST(SelfTraining, PseudoLabelsAreTheAccuratePixels) {
 TEST(SelfTraining, AnchoredLabelsKeepTheStartDepthWhereNoViewConfirms) {
   // With the start model's depth maps, every depth-grid pixel gets a label: the confirmed depth
   // where views agree (the same labels as without), the start depth everywhere else.
-  const std::string dir = write_room("anchored_labels", 42, false);
-  TupleConfig cfg = room_tuples(4);
-  cfg.read_ground_truth = false;
-  const auto tuples = fixed_tuples(MvsFolderSource({dir}, cfg), 0);
+  const auto tuples = unlabelled_room_tuples("anchored_labels", 42);
   auto model = load_model(default_model(), torch::kCPU).model;
   FusionConfig rule;
   rule.min_confidence = 0.5;
@@ -398,10 +404,7 @@ TEST(SelfTraining, AnchoredLabelsKeepTheStartDepthWhereNoViewConfirms) {
 TEST(SelfTraining, AnchorsCanBeLimitedToConfidentPixels) {
   // reference_depths with a confidence floor keeps the same depth where the model is confident
   // enough and 0 (no label) elsewhere; a higher floor keeps fewer pixels.
-  const std::string dir = write_room("anchored_confident", 43, false);
-  TupleConfig cfg = room_tuples(4);
-  cfg.read_ground_truth = false;
-  const auto tuples = fixed_tuples(MvsFolderSource({dir}, cfg), 0);
+  const auto tuples = unlabelled_room_tuples("anchored_confident", 43);
   auto model = load_model(default_model(), torch::kCPU).model;
   const auto all = reference_depths(model, tuples, 32, torch::kCPU);
   int64_t previous_kept = -1;
@@ -432,27 +435,27 @@ TEST(SelfTraining, AnchorsCanBeLimitedToConfidentPixels) {
 
 TEST(SelfTraining, AnchoredRunKeepsItsStartModelAndResumesWithinARoundExactly) {
   const std::string data = write_room("anchored_run", 52, false);
-  const std::string out = test::temp_dir("anchored_run_out");
-  std::filesystem::remove_all(out);
+  const std::string out = test::temp_dir("anchored_run_out");  // fresh and empty
+  const std::string log = out + "/umvs.log";  // inside the scratch folder, so that it goes with it
   const std::string common = " --data " + data + " --init " + default_model() +
                              " --width 64 --height 64 --num-depth 16 --views-loss 4 --top-k 2"
                              " --save-every 2 --threads 1 --seed 3";
   const std::string anchored = "--self-training-every 3";  // anchored by default
   const auto train = [&](const std::string& args) {
-    return std::system((test::umvs_binary() + " train" + common + " " + args + " > " + out + ".log 2>&1").c_str());
+    return std::system((test::umvs_binary() + " train" + common + " " + args + " > " + log + " 2>&1").c_str());
   };
-  ASSERT_EQ(train(anchored + " --steps 4 --out " + out + "/whole"), 0) << file_text(out + ".log");
-  EXPECT_NE(file_text(out + ".log").find("anchored self-training"), std::string::npos) << file_text(out + ".log");
+  ASSERT_EQ(train(anchored + " --steps 4 --out " + out + "/whole"), 0) << file_text(log);
+  EXPECT_NE(file_text(log).find("anchored self-training"), std::string::npos) << file_text(log);
   // Stopped at step 2, inside the round that began at step 0, and resumed: the anchors come from
   // anchor.pt, and the run ends where the uninterrupted one did.
-  ASSERT_EQ(train(anchored + " --steps 2 --out " + out + "/resumed"), 0) << file_text(out + ".log");
-  ASSERT_EQ(train(anchored + " --steps 4 --resume --out " + out + "/resumed"), 0) << file_text(out + ".log");
+  ASSERT_EQ(train(anchored + " --steps 2 --out " + out + "/resumed"), 0) << file_text(log);
+  ASSERT_EQ(train(anchored + " --steps 4 --resume --out " + out + "/resumed"), 0) << file_text(log);
   // Each round says what the unconfirmed pixels get, and how to leave them free.
-  EXPECT_NE(file_text(out + ".log").find("keep the start model's depth (anchored; --anchor-unconfirmed 0"), std::string::npos)
-      << file_text(out + ".log");
+  EXPECT_NE(file_text(log).find("keep the start model's depth (anchored; --anchor-unconfirmed 0"), std::string::npos)
+      << file_text(log);
   ASSERT_EQ(train("--self-training-every 3 --anchor-unconfirmed 0 --steps 4 --out " + out + "/plain"), 0)
-      << file_text(out + ".log");
-  EXPECT_EQ(file_text(out + ".log").find("keep the start model's depth"), std::string::npos) << file_text(out + ".log");
+      << file_text(log);
+  EXPECT_EQ(file_text(log).find("keep the start model's depth"), std::string::npos) << file_text(log);
   const auto whole = load_model(out + "/whole/last.pt", torch::kCPU).model;
   const auto resumed = load_model(out + "/resumed/last.pt", torch::kCPU).model;
   const auto plain = load_model(out + "/plain/last.pt", torch::kCPU).model;
@@ -474,41 +477,41 @@ TEST(SelfTraining, AnchoredRunKeepsItsStartModelAndResumesWithinARoundExactly) {
   // So a plain run (or a run of an older version, recorded alike) resumes as it was made, and the
   // default does not turn it into an anchored one unasked.
   EXPECT_NE(train("--self-training-every 3 --steps 6 --resume --out " + out + "/plain"), 0);
-  EXPECT_NE(file_text(out + ".log").find("--anchor-unconfirmed: the run in this folder has ''"), std::string::npos)
-      << file_text(out + ".log");
+  EXPECT_NE(file_text(log).find("--anchor-unconfirmed: the run in this folder has ''"), std::string::npos)
+      << file_text(log);
   EXPECT_EQ(train("--self-training-every 3 --anchor-unconfirmed 0 --steps 6 --resume --out " + out + "/plain"), 0)
-      << file_text(out + ".log");
+      << file_text(log);
   // A run that replaces it in its folder takes its anchor (and its round's labeller) away.
-  ASSERT_EQ(train("--steps 1 --overwrite --out " + out + "/whole"), 0) << file_text(out + ".log");
+  ASSERT_EQ(train("--steps 1 --overwrite --out " + out + "/whole"), 0) << file_text(log);
   EXPECT_FALSE(std::filesystem::exists(out + "/whole/anchor.pt"));
   EXPECT_FALSE(std::filesystem::exists(out + "/whole/round_start.pt"));
   EXPECT_NE(file_text(out + "/whole/run_config.txt").find("\nanchor-unconfirmed=\n"), std::string::npos);
   // Without self-training there is nothing to anchor; a resume that lost anchor.pt is refused.
   EXPECT_NE(train("--anchor-unconfirmed 1 --steps 2 --out " + out + "/refused"), 0);
-  EXPECT_NE(file_text(out + ".log").find("--self-training-every"), std::string::npos) << file_text(out + ".log");
+  EXPECT_NE(file_text(log).find("--self-training-every"), std::string::npos) << file_text(log);
   EXPECT_NE(train(anchored + " --anchor-unconfirmed 2 --steps 2 --out " + out + "/refused"), 0);
-  EXPECT_NE(file_text(out + ".log").find("--anchor-unconfirmed must be 0 or 1"), std::string::npos)
-      << file_text(out + ".log");
+  EXPECT_NE(file_text(log).find("--anchor-unconfirmed must be 0 or 1"), std::string::npos)
+      << file_text(log);
   EXPECT_FALSE(std::filesystem::exists(out + "/refused"));
   // A confidence floor for the anchors: only with anchoring, within [0, 1], recorded when set.
   EXPECT_NE(train("--self-training-every 3 --anchor-unconfirmed 0 --anchor-min-confidence 0.5 --steps 2 --out " + out +
                   "/refused"),
             0);
-  EXPECT_NE(file_text(out + ".log").find("--anchor-min-confidence chooses"), std::string::npos) << file_text(out + ".log");
+  EXPECT_NE(file_text(log).find("--anchor-min-confidence chooses"), std::string::npos) << file_text(log);
   EXPECT_NE(train(anchored + " --anchor-min-confidence 1.5 --steps 2 --out " + out + "/refused"), 0);
-  EXPECT_NE(file_text(out + ".log").find("--anchor-min-confidence must be in [0, 1]"), std::string::npos)
-      << file_text(out + ".log");
+  EXPECT_NE(file_text(log).find("--anchor-min-confidence must be in [0, 1]"), std::string::npos)
+      << file_text(log);
   EXPECT_FALSE(std::filesystem::exists(out + "/refused"));
   ASSERT_EQ(train(anchored + " --anchor-min-confidence 0.5 --steps 1 --out " + out + "/confident"), 0)
-      << file_text(out + ".log");
-  EXPECT_NE(file_text(out + ".log").find("where its confidence is at least 0.5"), std::string::npos)
-      << file_text(out + ".log");
+      << file_text(log);
+  EXPECT_NE(file_text(log).find("where its confidence is at least 0.5"), std::string::npos)
+      << file_text(log);
   EXPECT_NE(file_text(out + "/confident/run_config.txt").find("\nanchor-min-confidence=0.5\n"), std::string::npos);
   EXPECT_EQ(file_text(out + "/whole/run_config.txt").find("anchor-min-confidence"), std::string::npos);
-  ASSERT_EQ(train(anchored + " --steps 2 --out " + out + "/lost"), 0) << file_text(out + ".log");
+  ASSERT_EQ(train(anchored + " --steps 2 --out " + out + "/lost"), 0) << file_text(log);
   std::filesystem::remove(out + "/lost/anchor.pt");
   EXPECT_NE(train(anchored + " --steps 4 --resume --out " + out + "/lost"), 0);
-  EXPECT_NE(file_text(out + ".log").find("anchor.pt"), std::string::npos) << file_text(out + ".log");
+  EXPECT_NE(file_text(log).find("anchor.pt"), std::string::npos) << file_text(log);
 }
 
 TEST(SelfTraining, UmvsTrainReadsNoGroundTruth) {
