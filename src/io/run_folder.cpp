@@ -23,15 +23,18 @@ std::string run_config_difference(const RunConfig& stored, const RunConfig& curr
                                   const std::vector<std::string>& may_change) {
   RunConfig all = stored;
   all.insert(current.begin(), current.end());
+  // Every difference, not only the first: one refusal tells the whole resume command.
+  std::string differences;
   for (const auto& entry : all) {
     const std::string& name = entry.first;
     if (std::find(may_change.begin(), may_change.end(), name) != may_change.end()) continue;
     const auto a = stored.find(name), b = current.find(name);
     const std::string was = a == stored.end() ? "(not set)" : "'" + a->second + "'";
     const std::string now = b == current.end() ? "(not set)" : "'" + b->second + "'";
-    if (was != now) return "--" + name + ": the run in this folder has " + was + ", now " + now;
+    if (was == now) continue;
+    differences += (differences.empty() ? "" : "; ") + ("--" + name + ": the run in this folder has " + was + ", now " + now);
   }
-  return "";
+  return differences;
 }
 
 void check_run_folder(const std::string& out, RunStart start, const RunConfig& config,

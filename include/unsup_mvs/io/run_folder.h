@@ -28,14 +28,14 @@ constexpr const char* kRunConfigFile = "run_config.txt";
 // Checks, without changing anything, that a run may start in `out`. Throws std::invalid_argument
 // naming the problem: OUT is not a folder; kFresh and OUT is not empty (says to give --resume or
 // --overwrite); kResume and OUT/last.pt is missing, or an option differs from OUT/run_config.txt
-// (names the first such option and both values). Options in `may_change` (e.g. the step count) are
+// (names every such option and both values). Options in `may_change` (e.g. the step count) are
 // not compared. A run folder without run_config.txt (written before it existed) is accepted for
 // kResume with a warning on `warnings`.
 void check_run_folder(const std::string& out, RunStart start, const RunConfig& config,
                       const std::vector<std::string>& may_change, std::string* warnings);
 
-// The first option (in name order) whose value differs, as "--NAME: the run in OUT has A, now B";
-// "" when none. Options missing on one side count as differing ("(not set)").
+// Every option whose value differs, in name order, as "--NAME: the run in OUT has A, now B" joined
+// by "; "; "" when none. Options missing on one side count as differing ("(not set)").
 std::string run_config_difference(const RunConfig& stored, const RunConfig& current,
                                   const std::vector<std::string>& may_change);
 
