@@ -14,9 +14,10 @@
 # Usage: scripts/judge_audit.sh [WORK_DIR]
 #   environment: UMVS, THREADS (2), STEPS (150), SEEDS ("1 2": --seed of each fine-tuning run),
 #                ADAPT ("photometric self": photometric, and plain self-training (--anchor-unconfirmed 0);
-#                also "anchored", self-training as umvs train does it by default, "confident",
-#                anchored only where the start model is confident (--anchor-min-confidence 0.5),
-#                and "aggressive", 10x the learning rate),
+#                also "confident", self-training as umvs train does it by default (anchored
+#                where the start model is confident, --anchor-min-confidence 0.5), "anchored",
+#                every unconfirmed pixel anchored (the default before 2026-12-03), and
+#                "aggressive", 10x the learning rate),
 #                SCENES ("room:301 facade:302 dtu_like:303": `umvs synth` recipe:seed),
 #                SERVED (models/unsup_mvsnet.pt),
 #                TEXTURES ("none": procedural, the same scenes on every machine; "installed" renders
@@ -46,7 +47,7 @@ adapt_args() {
   case "$1" in
     photometric) echo "" ;;
     self) echo "--self-training-every 25 --anchor-unconfirmed 0" ;;
-    anchored) echo "--self-training-every 25 --anchor-unconfirmed 1" ;;
+    anchored) echo "--self-training-every 25 --anchor-unconfirmed 1 --anchor-min-confidence 0" ;;
     confident) echo "--self-training-every 25 --anchor-unconfirmed 1 --anchor-min-confidence 0.5" ;;
     aggressive) echo "--lr 1e-2" ;;
     *) echo "unknown adaptation '$1' (photometric | self | anchored | confident | aggressive)" >&2; return 1 ;;

@@ -474,10 +474,18 @@ TEST(SelfTraining, AnchoredRunKeepsItsStartModelAndResumesWithinARoundExactly) {
   // "1" when anchored, empty for plain self-training and for runs without self-training.
   EXPECT_NE(file_text(out + "/whole/run_config.txt").find("\nanchor-unconfirmed=1\n"), std::string::npos);
   EXPECT_NE(file_text(out + "/plain/run_config.txt").find("\nanchor-unconfirmed=\n"), std::string::npos);
+  // The anchors' confidence floor (0.5 by default) is recorded for anchored runs only.
+  EXPECT_NE(file_text(out + "/whole/run_config.txt").find("\nanchor-min-confidence=0.5\n"), std::string::npos);
+  EXPECT_EQ(file_text(out + "/plain/run_config.txt").find("anchor-min-confidence"), std::string::npos);
   // So a plain run (or a run of an older version, recorded alike) resumes as it was made, and the
   // default does not turn it into an anchored one unasked.
   EXPECT_NE(train("--self-training-every 3 --steps 6 --resume --out " + out + "/plain"), 0);
   EXPECT_NE(file_text(log).find("--anchor-unconfirmed: the run in this folder has ''"), std::string::npos)
+      << file_text(log);
+  // One refusal names every option that differs (the default floor comes with the default anchoring).
+  EXPECT_NE(file_text(log).find("--anchor-min-confidence: the run in this folder has (not set), now '0.5'; "
+                                "--anchor-unconfirmed"),
+            std::string::npos)
       << file_text(log);
   EXPECT_EQ(train("--self-training-every 3 --anchor-unconfirmed 0 --steps 6 --resume --out " + out + "/plain"), 0)
       << file_text(log);
@@ -493,7 +501,7 @@ TEST(SelfTraining, AnchoredRunKeepsItsStartModelAndResumesWithinARoundExactly) {
   EXPECT_NE(file_text(log).find("--anchor-unconfirmed must be 0 or 1"), std::string::npos)
       << file_text(log);
   EXPECT_FALSE(std::filesystem::exists(out + "/refused"));
-  // A confidence floor for the anchors: only with anchoring, within [0, 1], recorded when set.
+  // A confidence floor for the anchors: only with anchoring, within [0, 1], recorded when above 0.
   EXPECT_NE(train("--self-training-every 3 --anchor-unconfirmed 0 --anchor-min-confidence 0.5 --steps 2 --out " + out +
                   "/refused"),
             0);
@@ -502,12 +510,31 @@ TEST(SelfTraining, AnchoredRunKeepsItsStartModelAndResumesWithinARoundExactly) {
   EXPECT_NE(file_text(log).find("--anchor-min-confidence must be in [0, 1]"), std::string::npos)
       << file_text(log);
   EXPECT_FALSE(std::filesystem::exists(out + "/refused"));
-  ASSERT_EQ(train(anchored + " --anchor-min-confidence 0.5 --steps 1 --out " + out + "/confident"), 0)
+  ASSERT_EQ(train(anchored + " --anchor-min-confidence 0.7 --steps 1 --out " + out + "/confident"), 0)
       << file_text(log);
-  EXPECT_NE(file_text(log).find("where its confidence is at least 0.5"), std::string::npos)
+  EXPECT_NE(file_text(log).find("where its confidence is at least 0.7"), std::string::npos)
       << file_text(log);
-  EXPECT_NE(file_text(out + "/confident/run_config.txt").find("\nanchor-min-confidence=0.5\n"), std::string::npos);
-  EXPECT_EQ(file_text(out + "/whole/run_config.txt").find("anchor-min-confidence"), std::string::npos);
+  EXPECT_NE(file_text(out + "/confident/run_config.txt").find("\nanchor-min-confidence=0.7\n"), std::string::npos);
+  EXPECT_EQ(file_text(out + "/whole/run_config.txt").find("anchor-min-confidence"), std::string::npos)
+      << "a run without self-training has no anchors to floor";
+  // An anchored run without a recorded floor (0, as every anchored run before the 0.5 default)
+  // resumed without the option continues with its own floor and ends where it would have.
+  const std::string every_pixel = anchored + " --anchor-min-confidence 0";
+  ASSERT_EQ(train(every_pixel + " --steps 4 --out " + out + "/every_whole"), 0) << file_text(log);
+  EXPECT_EQ(file_text(out + "/every_whole/run_config.txt").find("anchor-min-confidence"), std::string::npos);
+  ASSERT_EQ(train(every_pixel + " --steps 2 --out " + out + "/every_resumed"), 0) << file_text(log);
+  EXPECT_NE(train(anchored + " --anchor-min-confidence 0.5 --steps 4 --resume --out " + out + "/every_resumed"), 0)
+      << "a floor the run was not made with is refused";
+  EXPECT_NE(file_text(log).find("--anchor-min-confidence: the run in this folder has (not set), now '0.5'"),
+            std::string::npos)
+      << file_text(log);
+  ASSERT_EQ(train(anchored + " --steps 4 --resume --out " + out + "/every_resumed"), 0) << file_text(log);
+  EXPECT_NE(file_text(log).find("anchors every unconfirmed pixel"), std::string::npos) << file_text(log);
+  const auto every_whole = load_model(out + "/every_whole/last.pt", torch::kCPU).model;
+  auto every_resumed = load_model(out + "/every_resumed/last.pt", torch::kCPU).model->named_parameters();
+  for (const auto& p : every_whole->named_parameters()) {
+    EXPECT_TRUE(torch::equal(p.value(), every_resumed[p.key()])) << p.key();
+  }
   ASSERT_EQ(train(anchored + " --steps 2 --out " + out + "/lost"), 0) << file_text(log);
   std::filesystem::remove(out + "/lost/anchor.pt");
   EXPECT_NE(train(anchored + " --steps 4 --resume --out " + out + "/lost"), 0);

@@ -96,6 +96,17 @@ umvs::RunConfig run_config_of(const umvs::Args& args) {
   return config;
 }
 
+// Whether OUT holds an anchored run recorded without a floor: made by a version before
+// --anchor-min-confidence defaulted to 0.5, or with 0. Read only to resume it as it was made;
+// check_run_folder still compares every option.
+bool anchored_without_recorded_floor(const std::string& out) {
+  const std::string path = (fs::path(out) / umvs::kRunConfigFile).string();
+  if (!fs::is_regular_file(path)) return false;
+  const umvs::RunConfig stored = umvs::read_run_config(path);
+  const auto anchored = stored.find("anchor-unconfirmed");
+  return anchored != stored.end() && anchored->second == "1" && stored.count("anchor-min-confidence") == 0;
+}
+
 // The integer options and option combinations, before anything is read or written.
 void check_training_options(const umvs::Args& args) {
   auto at_least = [&](const char* name, int lowest) {
@@ -279,9 +290,10 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
               "self-training: 1 = label the pixels no view confirms with the starting model's depth (kept as "
               "OUT/anchor.pt), so that adaptation changes what other views can check and keeps the rest; "
               "0 = leave them unlabelled (plain self-training)")
-      .option("anchor-min-confidence", "0",
+      .option("anchor-min-confidence", "0.5",
               "anchored self-training: anchor only the pixels the starting model gave at least this confidence "
-              "(0 = all; the others are left to the photometric loss)")
+              "(the others are left to the photometric loss; 0 = every unconfirmed pixel, the default before "
+              "2026-12-03)")
       .option("min-gain", "1", "exposure augmentation: lowest gain applied to a whole tuple (log-uniform draw)")
       .option("max-gain", "1", "exposure augmentation: highest gain (clipped at white)")
       .option("input-normalization", "per_image_channel",
@@ -481,10 +493,20 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
   // Recorded as what the run does, as the flag it was before anchoring became the default recorded
   // it ("1" anchored, "" otherwise), so that the runs of older versions still resume.
   run.options["anchor-unconfirmed"] = run.anchor_unconfirmed ? "1" : "";
-  run.anchor_min_confidence = anchor_min_confidence;
-  // Recorded only when set, so that the runs of versions without it resume.
+  run.anchor_min_confidence = run.anchor_unconfirmed ? anchor_min_confidence : 0.0;
+  // An anchored run of a version before the 0.5 default has no floor recorded: resumed without the
+  // option, it continues with the floor it was made with (0) instead of being refused.
+  if (run.anchor_unconfirmed && args.on("resume") && !args.given("anchor-min-confidence") &&
+      anchored_without_recorded_floor(args.str("out"))) {
+    run.anchor_min_confidence = 0.0;
+    std::cerr << "--resume: the run in " << args.str("out")
+              << " anchors every unconfirmed pixel (made before --anchor-min-confidence defaulted to 0.5): "
+                 "it continues so\n";
+  }
+  // Recorded only for an anchored run with a floor, so that runs without one (and those of versions
+  // before the option) resume.
   run.options.erase("anchor-min-confidence");
-  if (anchor_min_confidence > 0.0) run.options["anchor-min-confidence"] = args.str("anchor-min-confidence");
+  if (run.anchor_min_confidence > 0.0) run.options["anchor-min-confidence"] = args.str("anchor-min-confidence");
   run.device = device;
   run.distributed = distributed;
   run.options["world-size"] = std::to_string(distributed.world_size);  // the job's size, however it was given
