@@ -500,8 +500,8 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
       anchored_without_recorded_floor(args.str("out"))) {
     run.anchor_min_confidence = 0.0;
     std::cerr << "--resume: the run in " << args.str("out")
-              << " anchors every unconfirmed pixel (made before --anchor-min-confidence defaulted to 0.5): "
-                 "it continues so\n";
+              << " anchors every unconfirmed pixel (no floor recorded: made with --anchor-min-confidence 0 or "
+                 "before it defaulted to 0.5): it continues so\n";
   }
   // Recorded only for an anchored run with a floor, so that runs without one (and those of versions
   // before the option) resume.
