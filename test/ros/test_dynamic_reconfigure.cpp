@@ -14,6 +14,7 @@
 #include <limits>
 
 #include "rostest_util.h"
+#include "test_messages.h"
 #include "unsup_mvs/DepthEstimate.h"
 #include "unsup_mvs/KeyframeSet.h"
 #include "unsup_mvs/ReloadModel.h"
@@ -225,27 +226,7 @@ TEST(KeyframeSelectorReconfigureTest, StartsWithTheLaunchValuesAndChecksRequests
 constexpr char kInference[] = "/i/inference";
 constexpr int kWidth = 128, kHeight = 96;
 
-unsup_mvs::KeyframeSet make_set(uint32_t id) {
-  unsup_mvs::KeyframeSet s;
-  s.header.stamp = ros::Time::now();
-  s.header.frame_id = "world";
-  s.reference_id = id;
-  std_msgs::Header h;
-  h.stamp = s.header.stamp;
-  h.frame_id = "cam";
-  s.reference_image = umvs_test::make_image(kWidth, kHeight, h, 0);
-  s.reference_info = umvs_test::make_info(kWidth, kHeight, 100.0, h);
-  s.reference_pose = umvs_test::make_pose({0, 0, 0});
-  for (int j = 1; j <= 2; ++j) {
-    s.source_ids.push_back(id + j);
-    s.source_images.push_back(umvs_test::make_image(kWidth, kHeight, h, 3 * j));
-    s.source_infos.push_back(umvs_test::make_info(kWidth, kHeight, 100.0, h));
-    s.source_poses.push_back(umvs_test::make_pose({0.1 * j, 0, 0}));
-  }
-  s.depth_min = 1.0f;
-  s.depth_max = 3.0f;
-  return s;
-}
+unsup_mvs::KeyframeSet make_set(uint32_t id) { return umvs_test::keyframe_set(id, {kWidth, kHeight, 100.0, "cam"}); }
 
 TEST(InferenceReconfigureTest, ResolutionAndPoseRefinementTakeEffectAndBadValuesAreRefused) {
   ros::NodeHandle nh;

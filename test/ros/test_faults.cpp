@@ -20,6 +20,7 @@
 #include <thread>
 
 #include "rostest_util.h"
+#include "test_messages.h"
 #include "unsup_mvs/DepthEstimate.h"
 #include "unsup_mvs/FineTune.h"
 #include "unsup_mvs/KeyframeSet.h"
@@ -148,18 +149,7 @@ std::string FaultsTest::work_;
 // fusion: save_cloud
 
 unsup_mvs::DepthEstimate plane_estimate(uint32_t id, double x) {
-  constexpr int w = 64, h = 48;
-  unsup_mvs::DepthEstimate e;
-  e.header.stamp = ros::Time::now();
-  e.header.frame_id = "plane_cam";
-  e.keyframe_id = id;
-  e.depth = umvs::float_to_image_msg(torch::full({h, w}, 3.0f), e.header);
-  e.confidence = umvs::float_to_image_msg(torch::full({h, w}, 0.9f), e.header);
-  e.image = umvs::rgb8_to_image_msg(torch::full({h, w, 3}, 128, torch::kUInt8), e.header);
-  e.camera_info = umvs_test::make_info(w, h, 50.0, e.header);
-  e.world_frame = "world";
-  e.pose = umvs_test::make_pose({x, 0, 0});
-  return e;
+  return umvs_test::plane_estimate(id, x, "plane_cam");
 }
 
 TEST_F(FaultsTest, SaveCloudWritesOnlyInsideSaveDir) {
@@ -211,27 +201,8 @@ TEST_F(FaultsTest, SaveCloudWritesOnlyInsideSaveDir) {
 // ---------------------------------------------------------------------------------------------
 // inference: reload_model and keyframe sets
 
-unsup_mvs::KeyframeSet small_set(uint32_t id) {
-  unsup_mvs::KeyframeSet s;
-  s.header.stamp = ros::Time::now();
-  s.header.frame_id = "world";
-  s.reference_id = id;
-  std_msgs::Header h;
-  h.stamp = s.header.stamp;
-  h.frame_id = "cam64";
-  s.reference_image = umvs_test::make_image(64, 64, h, 0);
-  s.reference_info = umvs_test::make_info(64, 64, 50.0, h);
-  s.reference_pose = umvs_test::make_pose({0, 0, 0});
-  for (int j = 1; j <= 2; ++j) {
-    s.source_ids.push_back(id + j);
-    s.source_images.push_back(umvs_test::make_image(64, 64, h, 3 * j));
-    s.source_infos.push_back(umvs_test::make_info(64, 64, 50.0, h));
-    s.source_poses.push_back(umvs_test::make_pose({0.1 * j, 0, 0}));
-  }
-  s.depth_min = 1.0f;
-  s.depth_max = 3.0f;
-  return s;
-}
+// Frame "cam64" tells inference's answers to these from the other tests' estimates.
+unsup_mvs::KeyframeSet small_set(uint32_t id) { return umvs_test::keyframe_set(id, {64, 64, 50.0, "cam64"}); }
 
 class InferenceFaultsTest : public FaultsTest {
  protected:

@@ -12,6 +12,7 @@
 #include <filesystem>
 
 #include "rostest_util.h"
+#include "test_messages.h"
 #include "unsup_mvs/DepthEstimate.h"
 #include "unsup_mvs/ResetFusion.h"
 #include "unsup_mvs/SaveCloud.h"
@@ -22,26 +23,11 @@
 namespace {
 
 using umvs_test::wait_for;
-constexpr int kWidth = 64, kHeight = 48;
-constexpr double kFocal = 50.0, kPlaneZ = 3.0;
+using umvs_test::kPlaneZ;
 
-// Camera at (x, 0, 0) looking along +z at the plane z = kPlaneZ: depth kPlaneZ everywhere.
+// Red, so that the cloud's colour can be checked.
 unsup_mvs::DepthEstimate make_estimate(uint32_t id, double x) {
-  unsup_mvs::DepthEstimate e;
-  e.header.stamp = ros::Time::now();
-  e.header.frame_id = "cam";
-  e.keyframe_id = id;
-  e.depth = umvs::float_to_image_msg(torch::full({kHeight, kWidth}, kPlaneZ, torch::kFloat32), e.header);
-  e.confidence = umvs::float_to_image_msg(torch::full({kHeight, kWidth}, 0.9f), e.header);
-  auto color = torch::zeros({kHeight, kWidth, 3}, torch::kUInt8);
-  color.select(2, 0).fill_(200);
-  e.image = umvs::rgb8_to_image_msg(color, e.header);
-  e.camera_info = umvs_test::make_info(kWidth, kHeight, kFocal, e.header);
-  e.world_frame = "world";
-  e.pose = umvs_test::make_pose({x, 0, 0});
-  e.depth_min = 1;
-  e.depth_max = 5;
-  return e;
+  return umvs_test::plane_estimate(id, x, "cam", {200, 0, 0});
 }
 
 class FusionTest : public ::testing::Test {

@@ -15,6 +15,7 @@
 #include <sstream>
 
 #include "rostest_util.h"
+#include "test_messages.h"
 #include "unsup_mvs/DepthEstimate.h"
 #include "unsup_mvs/FineTune.h"
 #include "unsup_mvs/KeyframeSet.h"
@@ -173,22 +174,10 @@ class TrainerTest : public ::testing::Test {
     return set;
   }
 
-  // Estimates of a plane at z = 3 from cameras moving along x, for the fusion node.
-  unsup_mvs::DepthEstimate plane_estimate(uint32_t id, double x) {
-    constexpr int w = 64, h = 48;
-    unsup_mvs::DepthEstimate e;
-    e.header.stamp = ros::Time::now();
-    e.header.frame_id = "test";
-    e.keyframe_id = id;
-    e.depth = umvs::float_to_image_msg(torch::full({h, w}, 3.0f), e.header);
-    e.confidence = umvs::float_to_image_msg(torch::full({h, w}, 0.9f), e.header);
-    e.image = umvs::rgb8_to_image_msg(torch::full({h, w, 3}, 128, torch::kUInt8), e.header);
-    e.camera_info = umvs_test::make_info(w, h, 50.0, e.header);
-    e.world_frame = "world";
-    e.pose = umvs_test::make_pose({x, 0, 0});
-    e.depth_min = 1;
-    e.depth_max = 5;
-    return e;
+  // Estimates of a plane from cameras moving along x, for the fusion node; frame "test" tells them
+  // from the estimates inference sends.
+  static unsup_mvs::DepthEstimate plane_estimate(uint32_t id, double x) {
+    return umvs_test::plane_estimate(id, x, "test");
   }
 
   static std::string work_, umvs_, served_bytes_;
