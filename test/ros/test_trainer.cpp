@@ -1,6 +1,6 @@
 // rostest for the trainer node (FineTune.srv): bad requests are refused with the reason; a killed
 // training process leaves the served model, inference and fusion untouched; cancel and status
-// work and one job runs at a time; a fine-tuning job on
+// work and one job runs at a time; a fine-tuning job (self-training, as config/trainer.yaml does) on
 // a synthetic bag whose appearance differs from the model's training data (low-contrast textures,
 // specular highlights) reloads inference with a model whose depth error against ground truth is
 // lower than the served one's.
@@ -298,6 +298,10 @@ TEST_F(TrainerTest, FineTuningNeverServesAWorseModel) {
   EXPECT_GT(last->total_steps, 0);
   EXPECT_EQ(read_bytes(work_ + "/served.pt"), served_bytes_) << "the previous model must not be overwritten";
   const std::string model = work_ + "/models/" + r.job_id + ".pt";
+  // train_args self-train, as config/trainer.yaml does: the job kept the model that labelled its
+  // last round and the one that anchors it.
+  EXPECT_TRUE(fs::exists(work_ + "/models/" + r.job_id + "/round_start.pt"));
+  EXPECT_TRUE(fs::exists(work_ + "/models/" + r.job_id + "/anchor.pt"));
   const std::string fine_tuned = last->state == "reloaded" ? model : work_ + "/models/" + r.job_id + "/best.pt";
 
   // Inference serves the verdict's model.
