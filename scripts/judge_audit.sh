@@ -86,7 +86,9 @@ for spec in $SCENES; do
       "$WORK/judge/${scene}_${seed}_"* "$WORK/judge2/${scene}_${seed}_"*
   fi
   render "$data" "$scene" "$seed"
-  # The trainer node's train_args (config/trainer.yaml) and the scene's depth range.
+  # The trainer node's train_args (config/trainer.yaml) less its --self-training-every, which ADAPT
+  # chooses ("confident" is the node's default, "photometric" the node before 2026-12-03), and the
+  # scene's depth range.
   common="--bag $data.bag --width 320 --height 256 --num-depth 64 --holdout-every 5 $(depth_range "$data") --threads $THREADS"
   if [ "$SECOND_PASS" = 1 ]; then
     render "$data.pass2" "$scene" "$seed" --path-seed $((seed + 1000))
