@@ -31,6 +31,7 @@
 #include "unsup_mvs/io/checkpoint.h"
 #include "unsup_mvs/io/file_safety.h"
 #include "unsup_mvs/io/input_limits.h"
+#include "unsup_mvs/io/plane_count.h"
 #include "unsup_mvs/ros/nodelets.h"
 #include "unsup_mvs/ros/params.h"
 #include "unsup_mvs/ros/reconfigure.h"
@@ -77,16 +78,21 @@ bool same_settings(const umvs::DepthEstimatorConfig& a, const umvs::DepthEstimat
 }
 
 // An estimator serving `model` with `config`; refused (std::invalid_argument) when it would run
-// more than max_planes depth planes.
+// more than max_planes depth planes. With num_depth 0 the count is set per keyframe set
+// (fitPlanesToInput) and checked then.
 std::unique_ptr<umvs::DepthEstimator> make_estimator(const umvs::MvsNet& model, const torch::Device& device,
                                                      const umvs::DepthEstimatorConfig& config, int max_planes) {
-  auto estimator = std::make_unique<umvs::DepthEstimator>(model, device, config);
-  if (estimator->num_depth() > max_planes) {
-    throw std::invalid_argument("it runs with " + std::to_string(estimator->num_depth()) +
-                                " depth planes, more than ~max_planes " + std::to_string(max_planes) +
-                                " (set ~num_depth to override the checkpoint's)");
+  if (config.num_depth > max_planes) {
+    throw std::invalid_argument("it would run with " + std::to_string(config.num_depth) +
+                                " depth planes, more than ~max_planes " + std::to_string(max_planes));
   }
-  return estimator;
+  return std::make_unique<umvs::DepthEstimator>(model, device, config);
+}
+
+// What ~num_depth asks for, in words.
+std::string planes_description(int num_depth) {
+  return num_depth > 0 ? std::to_string(num_depth) + " depth planes"
+                       : "depth planes following the network input (128 at 640 wide, scaled with the width)";
 }
 
 // The online pose refinement the node's settings ask for (nullptr when off).
@@ -233,12 +239,15 @@ class InferenceNodelet : public nodelet::Nodelet {
                                     max_pixels, "source " + std::to_string(set.source_ids.size() > i ? set.source_ids[i] : i)));
     }
     umvs::DepthMap map;
+    int planes = 0;
     std::string served;
     bool refined = false;
     std::string refinement = "off";
     {
       std::lock_guard<std::mutex> lock(model_mutex_);
       if (!estimator_) throw std::runtime_error("no model loaded (set ~checkpoint or call reload_model)");
+      fitPlanesToInput(views.front());
+      planes = estimator_->num_depth();
       if (pose_refiner_) {
         refined = refineViews(set, &views);
         refinement = std::to_string(pose_refiner_->measured_pairs()) + " pairs over " +
@@ -281,7 +290,23 @@ class InferenceNodelet : public nodelet::Nodelet {
                     set.reference_id, s + 1, turn.degrees.x(), turn.degrees.y(), turn.degrees.z(),
                     100.0 * turn.full_size_gain);
     }
-    publishDiagnostics(total, map.seconds, latency, served, refinement);
+    publishDiagnostics(total, map.seconds, latency, planes, served, refinement);
+  }
+
+  // With ~num_depth 0 the planes follow the network input's width as in `umvs infer` (the model
+  // learnt a plane spacing per pixel: 64 planes at 320 wide beat 128 there, 128 beat 64 at 640 wide;
+  // docs/results.md). The estimator is rebuilt when the input's size asks for another count.
+  // Under model_mutex_.
+  void fitPlanesToInput(const umvs::ViewInput& reference) {
+    if (config_.num_depth > 0) return;
+    const umvs::NetworkResize plan = umvs::plan_network_resize(reference.camera.width, reference.camera.height,
+                                                               config_.max_width, config_.max_height);
+    const int planes = umvs::default_plane_count(plan.width);
+    if (estimator_->config().num_depth == planes) return;
+    umvs::DepthEstimatorConfig fitted = config_;
+    fitted.num_depth = planes;
+    estimator_ = make_estimator(estimator_->model(), device_, fitted, max_planes_);
+    NODELET_INFO("inference: %d depth planes for a %dx%d network input", planes, plan.width, plan.height);
   }
 
   // Corrects the keyframe set's cameras by the online pose refinement (under model_mutex_) and says
@@ -303,7 +328,7 @@ class InferenceNodelet : public nodelet::Nodelet {
     return true;
   }
 
-  void publishDiagnostics(double total, double network, double latency, const std::string& served,
+  void publishDiagnostics(double total, double network, double latency, int planes, const std::string& served,
                           const std::string& refinement) {
     diagnostic_msgs::DiagnosticArray array;
     array.header.stamp = ros::Time::now();
@@ -325,6 +350,7 @@ class InferenceNodelet : public nodelet::Nodelet {
     kv("last_network_s", std::to_string(network));
     kv("last_latency_s", std::to_string(latency));
     kv("mean_total_s", std::to_string(seconds_sum_ / std::max(1L, processed_)));
+    kv("depth_planes", std::to_string(planes));
     kv("checkpoint", served);
     kv("pose_refinement", refinement);
     array.status.push_back(status);
@@ -359,7 +385,7 @@ class InferenceNodelet : public nodelet::Nodelet {
       throw std::runtime_error("a test forward pass gives non-finite depth or confidence");
     }
     c.description = "loaded " + path + " (" + loaded.format + ", " + loaded.model->config().to_string() + "), " +
-                    std::to_string(c.estimator->num_depth()) + " depth planes on " + device.str() + ", " +
+                    planes_description(config.num_depth) + " on " + device.str() + ", " +
                     std::to_string(torch::get_num_threads()) + " threads";
     return c;
   }

@@ -228,7 +228,7 @@ constexpr int kWidth = 128, kHeight = 96;
 
 unsup_mvs::KeyframeSet make_set(uint32_t id) { return umvs_test::keyframe_set(id, {kWidth, kHeight, 100.0, "cam"}); }
 
-TEST(InferenceReconfigureTest, ResolutionAndPoseRefinementTakeEffectAndBadValuesAreRefused) {
+TEST(InferenceReconfigureTest, ResolutionPlanesAndPoseRefinementTakeEffectAndBadValuesAreRefused) {
   ros::NodeHandle nh;
   umvs_test::RosoutCapture log(nh);
   auto c = reconfigure(kInference);
@@ -285,12 +285,13 @@ TEST(InferenceReconfigureTest, ResolutionAndPoseRefinementTakeEffectAndBadValues
   EXPECT_NEAR(e->camera_info.K[0], 100.0 * 0.5 / 4, 1e-9);
 
   // The online pose refinement turns on and off live; /diagnostics says what it knows.
-  std::string refinement;
+  std::string refinement, planes;
   ros::Subscriber diagnostics = nh.subscribe<diagnostic_msgs::DiagnosticArray>(
       "/diagnostics", 10, [&](const diagnostic_msgs::DiagnosticArrayConstPtr& m) {
         for (const auto& status : m->status) {
           for (const auto& value : status.values) {
             if (value.key == "pose_refinement") refinement = value.value;
+            if (value.key == "depth_planes") planes = value.value;
           }
         }
       });
@@ -304,6 +305,18 @@ TEST(InferenceReconfigureTest, ResolutionAndPoseRefinementTakeEffectAndBadValues
   EXPECT_DOUBLE_EQ(double_of(c, "pose_refinement_deg"), 0.0);
   ASSERT_TRUE(estimate(4)) << log.all();
   EXPECT_TRUE(wait_for([&] { return refinement == "off"; }, 10.0)) << refinement;
+  EXPECT_EQ(planes, "8");
+
+  // num_depth 0: the planes follow the network input as in `umvs infer` (128 at 640 wide, scaled
+  // with the width, at least 16), not the checkpoint's count (MvsNetConfig's default).
+  ASSERT_NE(umvs::MvsNetConfig{}.num_depth, 24);
+  c = reconfigure(kInference, Request().set("num_depth", 0));
+  EXPECT_EQ(int_of(c, "num_depth"), 0);
+  ASSERT_TRUE(estimate(5)) << log.all();
+  EXPECT_TRUE(wait_for([&] { return planes == "16"; }, 10.0)) << planes;  // 64 wide
+  c = reconfigure(kInference, Request().set("max_width", 128).set("max_height", 96));
+  ASSERT_TRUE(estimate(6)) << log.all();
+  EXPECT_TRUE(wait_for([&] { return planes == "24"; }, 10.0)) << planes;  // 128 wide
 }
 
 }  // namespace

@@ -89,9 +89,6 @@ class FaultsTest : public ::testing::Test {
     config.num_depth = 32;
     umvs::MvsNet net(config);
     umvs::save_checkpoint(work_ + "/model.pt", net);
-    config.num_depth = 128;  // more than the node's ~max_planes 64
-    umvs::MvsNet deep(config);
-    umvs::save_checkpoint(work_ + "/deep.pt", deep);
     write_text(work_ + "/fake_umvs.sh", kFakeUmvs);
     fs::permissions(work_ + "/fake_umvs.sh", fs::perms::owner_all);
     write_text(work_ + "/fake.bag", "a bag the stand-in never reads");
@@ -261,7 +258,7 @@ TEST_F(InferenceFaultsTest, ReloadOfAFifoNeitherBlocksTheServiceNorTheDepthMaps)
   EXPECT_NE(message.find("is a FIFO, not a regular file"), std::string::npos) << message;
 }
 
-TEST_F(InferenceFaultsTest, ReloadRefusesDevicesFoldersOversizedFilesAndTooManyPlanes) {
+TEST_F(InferenceFaultsTest, ReloadRefusesDevicesFoldersAndOversizedFiles) {
   // Each must be refused at once, naming the reason, and the served model stays.
   {
     std::ofstream(work_ + "/huge.pt");
@@ -271,7 +268,6 @@ TEST_F(InferenceFaultsTest, ReloadRefusesDevicesFoldersOversizedFilesAndTooManyP
   const std::vector<std::pair<std::string, std::string>> cases = {
       {work_, "is a folder, not a regular file"},
       {work_ + "/huge.pt", "is 9437184 bytes, more than the limit of 8388608"},
-      {work_ + "/deep.pt", "128 depth planes, more than ~max_planes 64"},
       {work_ + "/missing.pt", "cannot open"},
       {"/dev/zero", "is a device, not a regular file"},
   };
@@ -293,6 +289,17 @@ TEST_F(InferenceFaultsTest, TruncatedAndOversizedImagesInASetAreRefused) {
   EXPECT_TRUE(umvs_test::publish_until_logged(keyframes_pub_, oversized, log, "more than the limit of 40000", 20.0)) << log.all();
   for (const auto& e : estimates_) EXPECT_TRUE(e->keyframe_id != 10 && e->keyframe_id != 11) << e->keyframe_id;
   EXPECT_TRUE(estimate_arrives(12, 60.0)) << log.all();
+}
+
+TEST_F(InferenceFaultsTest, ASetAskingForMorePlanesThanMaxPlanesIsRefused) {
+  // ~num_depth 0: the planes follow the network input, 16 for the 64-wide sets, 24 for a 128-wide
+  // one, more than ~max_planes 16.
+  umvs_test::RosoutCapture log(nh_);
+  const auto wide = umvs_test::keyframe_set(20, {128, 128, 100.0, "cam64"});
+  EXPECT_TRUE(umvs_test::publish_until_logged(keyframes_pub_, wide, log, "24 depth planes, more than ~max_planes 16",
+                                              20.0)) << log.all();
+  for (const auto& e : estimates_) EXPECT_NE(e->keyframe_id, 20u);
+  EXPECT_TRUE(estimate_arrives(21, 60.0)) << log.all();
 }
 
 // ---------------------------------------------------------------------------------------------

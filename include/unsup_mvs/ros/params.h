@@ -34,7 +34,7 @@ umvs::FusionConfig fusion_config_from_ros(const ros::NodeHandle& nh);
 struct InferenceNodeConfig {
   std::string device = "cpu";
   int threads = 0;                            // 0 = all cores
-  umvs::DepthEstimatorConfig estimator{640, 512, 0};  // max_width, max_height, num_depth (0 = the model's)
+  umvs::DepthEstimatorConfig estimator{640, 512, 0};  // max_width, max_height, num_depth (0 = follow the input)
   bool rectified = umvs::KeyframeStreamConfig{}.rectified;  // as the keyframe_selector reads CameraInfo
   std::string checkpoint;
   int max_image_pixels = kDefaultMaxImagePixels;
