@@ -299,6 +299,44 @@ TEST(InferArguments, PlaneCountFollowsTheInputSizeNotTheCheckpoint) {
   EXPECT_EQ(read_cam_file(dir + "/given/cams/00000000_cam.txt").depth_num, 24);
 }
 
+// `umvs train` sweeps as many planes as infer would at its --width (the count the shipped model
+// was trained with at each size); a --resume keeps the run's own count.
+TEST(TrainArguments, PlaneCountFollowsTheWidthAndAResumeKeepsTheRuns) {
+  const std::string data = scene("train_planes_data");  // 96x64
+  const std::string dir = test::temp_dir("train_planes");
+  const std::string flags = " --width 96 --height 64 --views-loss 3 --top-k 2 --threads 1 --save-every 2";
+  Result by_default = run_umvs("train --data " + data + flags + " --steps 2 --out " + dir + "/default");
+  ASSERT_EQ(by_default.status, 0) << by_default.output;
+  EXPECT_TRUE(contains(by_default.output, "depth planes: 16 (default for 96 wide")) << by_default.output;
+  EXPECT_EQ(read_run_config(dir + "/default/run_config.txt").at("num-depth"), "16");
+  EXPECT_EQ(load_model(dir + "/default/last.pt", torch::kCPU).model->config().num_depth, 16);
+
+  // Scoring a checkpoint follows the width the same way.
+  Result scored = run_umvs("train --data " + data + flags + " --eval-only " + dir + "/default/last.pt");
+  ASSERT_EQ(scored.status, 0) << scored.output;
+  EXPECT_TRUE(contains(scored.output, "depth planes: 16 (default for 96 wide")) << scored.output;
+
+  // A run made with 8 planes (or under the old default of 128) resumes with its own count when
+  // --num-depth is not given, and is refused, naming the option, when another one is.
+  ASSERT_EQ(run_umvs("train --data " + data + flags + " --num-depth 8 --steps 2 --out " + dir + "/eight").status, 0);
+  Result resumed = run_umvs("train --data " + data + flags + " --steps 4 --resume --out " + dir + "/eight");
+  ASSERT_EQ(resumed.status, 0) << resumed.output;
+  EXPECT_TRUE(contains(resumed.output, "depth planes: 8 (as the run in --out was made)")) << resumed.output;
+  EXPECT_EQ(load_model(dir + "/eight/last.pt", torch::kCPU).meta.step, 4);
+  const auto before = snapshot(dir + "/eight");
+  Result other = run_umvs("train --data " + data + flags + " --num-depth 16 --steps 6 --resume --out " + dir + "/eight");
+  EXPECT_EQ(other.status, 2) << other.output;
+  EXPECT_TRUE(contains(other.output, "--num-depth: the run in this folder has")) << other.output;
+  EXPECT_EQ(snapshot(dir + "/eight"), before);
+
+  // With --width 0 (each image's own size) there is no width to follow: refused before anything is written.
+  Result own_size = run_umvs("train --data " + data + " --width 0 --height 0 --views-loss 3 --top-k 2 --threads 1 "
+                             "--steps 2 --out " + dir + "/own_size");
+  EXPECT_EQ(own_size.status, 2) << own_size.output;
+  EXPECT_TRUE(contains(own_size.output, "with --width 0 (each image's own size) give --num-depth")) << own_size.output;
+  EXPECT_FALSE(fs::exists(dir + "/own_size"));
+}
+
 TEST(ResourceBounds, PlanesVolumesAndImagesAboveTheBoundsAreRefused) {
   // The estimates: MVSNet's DTU evaluation size fits, four times its pixels do not.
   EXPECT_LT(estimated_inference_bytes(1600, 1184, 192, 3), kMaxInferenceBytes);

@@ -15,6 +15,7 @@
 #include "unsup_mvs/io/checkpoint.h"
 #include "unsup_mvs/io/fine_tune_job.h"
 #include "unsup_mvs/io/local_ranks.h"
+#include "unsup_mvs/io/plane_count.h"
 #include "unsup_mvs/io/run_folder.h"
 #include "unsup_mvs/io/training_data.h"
 #include "unsup_mvs/io/training_run.h"
@@ -105,6 +106,33 @@ bool anchored_without_recorded_floor(const std::string& out) {
   const umvs::RunConfig stored = umvs::read_run_config(path);
   const auto anchored = stored.find("anchor-unconfirmed");
   return anchored != stored.end() && anchored->second == "1" && stored.count("anchor-min-confidence") == 0;
+}
+
+// The planes a run sweeps: --num-depth, else those the run in OUT was made with (a --resume), else
+// the default for the network width that infer and the inference node also use (the shipped model
+// was trained so at each of its sizes: 160 wide with 32, 320 with 64, 640 with 128).
+umvs::PlaneCount training_plane_count(const umvs::Args& args) {
+  const int requested = args.integer("num-depth");
+  if (requested != 0) return {requested, "--num-depth " + std::to_string(requested)};
+  const std::string path = (fs::path(args.str("out")) / umvs::kRunConfigFile).string();
+  if (args.on("resume") && fs::is_regular_file(path)) {
+    const umvs::RunConfig stored = umvs::read_run_config(path);
+    const auto recorded = stored.find("num-depth");
+    if (recorded != stored.end()) {
+      try {
+        return {std::stoi(recorded->second), "as the run in --out was made"};
+      } catch (const std::exception&) {
+        throw std::invalid_argument(path + " records num-depth '" + recorded->second + "': give --num-depth");
+      }
+    }
+  }
+  const int width = args.integer("width");
+  if (width == 0) {
+    throw std::invalid_argument("--num-depth 0 follows --width; with --width 0 (each image's own size) give "
+                                "--num-depth (128 at 640 wide)");
+  }
+  const int planes = umvs::default_plane_count(width);
+  return {planes, "default for " + std::to_string(width) + " wide: 128 at 640, scaled with the width; --num-depth to change"};
 }
 
 // The integer options and option combinations, before anything is read or written.
@@ -304,7 +332,9 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
       .option("top-k", "3", "views kept per pixel by --loss robust (1..M)")
       .option("width", "640", "network input width (multiple of 32; 0 = from the images)")
       .option("height", "512", "network input height (multiple of 32; 0 = from the images)")
-      .option("num-depth", "128", "depth hypotheses during training (multiple of 8)")
+      .option("num-depth", "0",
+              "depth hypotheses (multiple of 8; 0 = 128 at 640 wide, scaled with --width, as umvs infer and the "
+              "shipped model's training; a --resume without it keeps the run's)")
       .option("depth-sampling", "depth", "depth | inverse_depth (new models only)")
       .option("feature-warp", "",
               "exact | mvsnet_pytorch: where the cost volume samples the source views (default: the --init "
@@ -360,7 +390,8 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
     throw std::invalid_argument("--loss must be naive, first-order, robust or supervised, got '" + loss + "'");
   }
   tcfg.supervised_weight = args.real("supervised-weight");
-  tcfg.num_depth = args.integer("num-depth");
+  const umvs::PlaneCount planes = training_plane_count(args);
+  tcfg.num_depth = planes.planes;
   tcfg.lr = args.real("lr");
   tcfg.lr_schedule = umvs::parse_lr_schedule(args.str("lr-schedule"));
   tcfg.lr_min = args.real("lr-min");
@@ -428,7 +459,8 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
     }
     // --eval-only scores held-out bag keyframes, or the --data folders themselves.
     std::cerr << "data: " << (eval_only && from_bags ? *data.held_out : *data.train).description()
-              << "\nloss: " << tcfg.loss.to_string() << "\n";
+              << "\nloss: " << tcfg.loss.to_string() << "\ndepth planes: " << tcfg.num_depth << " (" << planes.why
+              << ")\n";
     return data;
   };
 
@@ -466,6 +498,7 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
               : args.on("overwrite") ? umvs::RunStart::kOverwrite
                                      : umvs::RunStart::kFresh;
   run.options = run_config_of(args);
+  run.options["num-depth"] = std::to_string(tcfg.num_depth);  // the count, whether given or followed from --width
   run.may_change_on_resume = kMayChangeOnResume;
   run.init = args.str("init");
   run.fine_tuned_share = args.real("fine-tuned-share");
