@@ -97,15 +97,21 @@ umvs::RunConfig run_config_of(const umvs::Args& args) {
   return config;
 }
 
-// Whether OUT holds an anchored run recorded without a floor: made by a version before
-// --anchor-min-confidence defaulted to 0.5, or with 0. Read only to resume it as it was made;
-// check_run_folder still compares every option.
-bool anchored_without_recorded_floor(const std::string& out) {
+// The options the run in OUT was made with (its run_config.txt), if it has one; read only to resume
+// it as it was made (check_run_folder still compares every option).
+std::optional<umvs::RunConfig> recorded_run_config(const std::string& out) {
   const std::string path = (fs::path(out) / umvs::kRunConfigFile).string();
-  if (!fs::is_regular_file(path)) return false;
-  const umvs::RunConfig stored = umvs::read_run_config(path);
-  const auto anchored = stored.find("anchor-unconfirmed");
-  return anchored != stored.end() && anchored->second == "1" && stored.count("anchor-min-confidence") == 0;
+  if (!fs::is_regular_file(path)) return std::nullopt;
+  return umvs::read_run_config(path);
+}
+
+// Whether OUT holds an anchored run recorded without a floor: made by a version before
+// --anchor-min-confidence defaulted to 0.5, or with 0.
+bool anchored_without_recorded_floor(const std::string& out) {
+  const auto stored = recorded_run_config(out);
+  if (!stored) return false;
+  const auto anchored = stored->find("anchor-unconfirmed");
+  return anchored != stored->end() && anchored->second == "1" && stored->count("anchor-min-confidence") == 0;
 }
 
 // The planes a run sweeps: --num-depth, else those the run in OUT was made with (a --resume), else
@@ -114,16 +120,13 @@ bool anchored_without_recorded_floor(const std::string& out) {
 umvs::PlaneCount training_plane_count(const umvs::Args& args) {
   const int requested = args.integer("num-depth");
   if (requested != 0) return {requested, "--num-depth " + std::to_string(requested)};
-  const std::string path = (fs::path(args.str("out")) / umvs::kRunConfigFile).string();
-  if (args.on("resume") && fs::is_regular_file(path)) {
-    const umvs::RunConfig stored = umvs::read_run_config(path);
-    const auto recorded = stored.find("num-depth");
-    if (recorded != stored.end()) {
-      try {
-        return {std::stoi(recorded->second), "as the run in --out was made"};
-      } catch (const std::exception&) {
-        throw std::invalid_argument(path + " records num-depth '" + recorded->second + "': give --num-depth");
-      }
+  const auto stored = args.on("resume") ? recorded_run_config(args.str("out")) : std::nullopt;
+  if (stored && stored->count("num-depth")) {
+    const std::string& recorded = stored->at("num-depth");
+    try {
+      return {std::stoi(recorded), "as the run in --out was made"};
+    } catch (const std::exception&) {
+      throw std::invalid_argument("the run in --out records num-depth '" + recorded + "': give --num-depth");
     }
   }
   const int width = args.integer("width");
