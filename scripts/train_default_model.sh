@@ -20,7 +20,9 @@
 #   RENDER_JOBS (scenes rendered at once, 1), LR (1e-3), LR_SCHEDULE (constant | cosine), LR_MIN (0),
 #   FEATURE_WARP (exact; mvsnet_pytorch only to reproduce models trained before the warp was fixed),
 #   RENDER_WIDTH x RENDER_HEIGHT (320 x 256: the rendered scenes' size), SUPERVISED_SHARE (0.75: the
-#   share of tuples from rendered scenes; the rest are templeRing's, photometric)
+#   share of tuples from rendered scenes; the rest are templeRing's, photometric), MIN_ZOOM and
+#   MAX_ZOOM (1 and 1.25: the random crop's zoom; RENDER_WIDTH / WIDTH trains on crops at the
+#   renders' own pixel scale, `umvs train --min-zoom`)
 #
 # The shipped model is three runs of this script, each from the one before (docs/results.md,
 # "Default model", has each run's log and scores; TEXTURES as installed by install_textures.sh):
@@ -58,6 +60,8 @@ FEATURE_WARP="${FEATURE_WARP:-exact}"
 RENDER_WIDTH="${RENDER_WIDTH:-320}"
 RENDER_HEIGHT="${RENDER_HEIGHT:-256}"
 SUPERVISED_SHARE="${SUPERVISED_SHARE:-0.75}"
+MIN_ZOOM="${MIN_ZOOM:-1}"
+MAX_ZOOM="${MAX_ZOOM:-1.25}"
 SHARED="${UMVS_SHARED_DATA:-$here/../../shared/data}"
 
 [ -x "$UMVS" ] || { echo "umvs not found at $UMVS (set UMVS=/path/to/umvs)" >&2; exit 1; }
@@ -96,7 +100,7 @@ resume=()
 if [ -f "$WORK/run/last.pt" ]; then resume=(--resume); fi
 "$UMVS" train "${data[@]}" --val "$val_list" --out "$WORK/run" --width "$WIDTH" --height "$HEIGHT" \
   --num-depth "$NUM_DEPTH" --batch "$BATCH" --device "$DEVICE" --max-minutes "$MAX_MINUTES" --depth-sampling inverse_depth --input-normalization per_image_channel \
-  --feature-warp "$FEATURE_WARP" \
+  --feature-warp "$FEATURE_WARP" --min-zoom "$MIN_ZOOM" --max-zoom "$MAX_ZOOM" \
   --views-in 3 --views-loss 6 --top-k 3 --preset paper --supervised-weight 0.1 --min-gain 0.25 --max-gain 1.5 \
   --lr "$LR" --lr-schedule "$LR_SCHEDULE" --lr-min "$LR_MIN" --steps "$STEPS" --save-every 500 --val-tuples 15 --seed "$SEED" --threads "$THREADS" "${start[@]}" "${resume[@]}"
 echo "[default-model] done: $WORK/run/last.pt (copy it to models/unsup_mvsnet.pt)"

@@ -337,6 +337,31 @@ TEST(TrainArguments, PlaneCountFollowsTheWidthAndAResumeKeepsTheRuns) {
   EXPECT_FALSE(fs::exists(dir + "/own_size"));
 }
 
+TEST(TrainArguments, ZoomRangeIsCheckedFirstAndRecordedOnlyWhenNotTheDefault) {
+  const std::string data = scene("train_zoom_data");  // 96x64
+  const std::string dir = test::temp_dir("train_zoom");
+  const std::string flags = " --width 64 --height 32 --num-depth 8 --views-loss 3 --top-k 2 --threads 1 --save-every 2";
+  Result inverted = run_umvs("train --data " + data + flags + " --min-zoom 2 --max-zoom 1.5 --steps 2 --out " + dir + "/inverted");
+  EXPECT_EQ(inverted.status, 2) << inverted.output;
+  EXPECT_TRUE(contains(inverted.output, "1 <= --min-zoom <= --max-zoom, got [2.0")) << inverted.output;
+  EXPECT_FALSE(fs::exists(dir + "/inverted"));
+  Result no_augment = run_umvs("train --data " + data + flags + " --augment 0 --min-zoom 1.5 --steps 2 --out " + dir + "/plain");
+  EXPECT_EQ(no_augment.status, 2) << no_augment.output;
+  EXPECT_TRUE(contains(no_augment.output, "--augment 0 crops nothing")) << no_augment.output;
+  EXPECT_FALSE(fs::exists(dir + "/plain"));
+
+  // A run with its own range records it (a resume must keep it); the default range is not
+  // recorded, so that runs of versions before the options resume.
+  ASSERT_EQ(run_umvs("train --data " + data + flags + " --min-zoom 1.5 --max-zoom 1.5 --steps 2 --out " + dir + "/crops").status, 0);
+  EXPECT_EQ(read_run_config(dir + "/crops/run_config.txt").at("min-zoom"), "1.5");
+  Result changed = run_umvs("train --data " + data + flags + " --steps 4 --resume --out " + dir + "/crops");
+  EXPECT_EQ(changed.status, 2) << changed.output;
+  EXPECT_TRUE(contains(changed.output, "--min-zoom: the run in this folder has '1.5', now (not set)")) << changed.output;
+  ASSERT_EQ(run_umvs("train --data " + data + flags + " --steps 2 --out " + dir + "/default").status, 0);
+  EXPECT_EQ(read_run_config(dir + "/default/run_config.txt").count("min-zoom"), 0u);
+  EXPECT_EQ(read_run_config(dir + "/default/run_config.txt").count("max-zoom"), 0u);
+}
+
 TEST(ResourceBounds, PlanesVolumesAndImagesAboveTheBoundsAreRefused) {
   // The estimates: MVSNet's DTU evaluation size fits, four times its pixels do not.
   EXPECT_LT(estimated_inference_bytes(1600, 1184, 192, 3), kMaxInferenceBytes);

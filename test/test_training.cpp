@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 #include <torch/torch.h>
 
+#include <algorithm>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -87,6 +88,42 @@ TEST(TrainingData, CroppedTuplesKeepGeometryConsistent) {
   bad = cfg;
   bad.width = 100;
   EXPECT_THROW(MvsFolderSource({dir}, bad), std::invalid_argument);
+}
+
+TEST(TrainingData, ZoomRangeCropsAtTheImagesOwnPixelScale) {
+  // 256x192 renders trained at 128x96: zoom 1 halves them (focal length x 0.5), zoom 2 crops them
+  // at their own scale (focal length x 1, the scale they are used at), zoom 2.5 enlarges them.
+  const std::string dir = write_scene("zoom_range", 256, 192, 5);
+  const double fx = read_cam_file(dir + "/cams/00000000_cam.txt").camera.K(0, 0);
+  TupleConfig cfg;
+  cfg.views_in = 3;
+  cfg.views_loss = 2;
+  cfg.width = 128;
+  cfg.height = 96;
+  auto focal_ratios = [&](double min_zoom, double max_zoom) {
+    cfg.min_zoom = min_zoom;
+    cfg.max_zoom = max_zoom;
+    MvsFolderSource source({dir}, cfg);
+    std::mt19937_64 rng(5);
+    std::vector<double> ratios;
+    for (int i = 0; i < 20; ++i) {
+      const auto t = source.tuple(i % source.size(), &rng);
+      EXPECT_EQ(t.network_views[0].image.size(1), 128);
+      ratios.push_back(t.network_views[0].camera.K(0, 0) / fx);
+    }
+    return ratios;
+  };
+  for (double r : focal_ratios(2.0, 2.0)) EXPECT_NEAR(r, 1.0, 1e-9);
+  for (double r : focal_ratios(2.0, 2.5)) {
+    EXPECT_GE(r, 1.0 - 0.01);  // (the scaled size is rounded to whole pixels)
+    EXPECT_LE(r, 1.25 + 0.01);
+  }
+  const auto by_default = focal_ratios(1.0, 1.25);
+  EXPECT_LE(*std::max_element(by_default.begin(), by_default.end()), 0.625 + 0.01);
+  EXPECT_GE(*std::min_element(by_default.begin(), by_default.end()), 0.5 - 0.01);
+  cfg.min_zoom = 2.0;
+  cfg.max_zoom = 1.5;
+  EXPECT_THROW(cfg.validate(), std::invalid_argument);
 }
 
 TEST(TrainingData, SkippedViewsAreCountedWithTheNeighboursTheyLack) {

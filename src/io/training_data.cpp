@@ -21,7 +21,10 @@ void TupleConfig::validate() const {
     bad("--width/--height must be multiples of 32 (0 = from the images), got " + std::to_string(width) + "x" +
         std::to_string(height));
   }
-  if (!(max_zoom >= 1.0) || !std::isfinite(max_zoom)) bad("max_zoom must be >= 1");
+  if (!(min_zoom >= 1.0) || !(max_zoom >= min_zoom) || !std::isfinite(max_zoom)) {
+    bad("the crop's zoom must satisfy 1 <= --min-zoom <= --max-zoom, got [" + std::to_string(min_zoom) + ", " +
+        std::to_string(max_zoom) + "]");
+  }
   if (!(jitter >= 0.0 && jitter < 1.0)) bad("jitter must be in [0, 1)");
   if (supervised && !read_ground_truth) bad("supervised training reads ground truth: read_ground_truth must be on");
   if (!(min_gain > 0.0) || !(max_gain >= min_gain) || !std::isfinite(max_gain)) {
@@ -123,7 +126,7 @@ TrainingTuple make_training_tuple(std::string name, const ViewInput& ref, const 
     width = p.width;
     height = p.height;
   }
-  const double zoom = rng ? uniform(*rng, 1.0, config.max_zoom) : 1.0;
+  const double zoom = rng ? uniform(*rng, config.min_zoom, config.max_zoom) : 1.0;
   const double fx = rng ? uniform(*rng, 0.0, 1.0) : 0.5, fy = rng ? uniform(*rng, 0.0, 1.0) : 0.5;
   const NetworkResize plan = cover_and_crop(W0, H0, width, height, zoom, fx, fy);
   // One photometric change for the whole tuple: contrast, brightness, per-channel gain.

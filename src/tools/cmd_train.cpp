@@ -357,6 +357,11 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
       .option("save-every", "500", "validate and checkpoint every this many steps (and at the end)")
       .option("max-minutes", "0", "stop after this much wall time (checkpoint, resumable with --resume; 0 = no limit)")
       .option("augment", "1", "1: random zoom/crop and photometric jitter; 0: none")
+      .option("min-zoom", "1",
+              "augmentation: smallest zoom of the random crop (1 = each image scaled to just cover --width x "
+              "--height; the images' width / --width crops at their own pixel scale, e.g. 2 for 640x512 images "
+              "at --width 320: the scale of use at a quarter of the cost)")
+      .option("max-zoom", "1.25", "augmentation: largest zoom of the random crop")
       .option("jitter", "0.1", "photometric jitter strength")
       .option("seed", "1", "seed of the initial weights and of the data order")
       .option("device", "cpu", "cpu | cuda | cuda:N")
@@ -434,7 +439,11 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
                                 "--self-training-every N (and not --anchor-unconfirmed 0)");
   }
   const bool augment = args.integer("augment") != 0;
-  if (!augment) data_cfg.max_zoom = 1.0;
+  if (!augment && (args.given("min-zoom") || args.given("max-zoom"))) {
+    throw std::invalid_argument("--min-zoom/--max-zoom set the random crop of --augment 1; --augment 0 crops nothing");
+  }
+  data_cfg.min_zoom = augment ? args.real("min-zoom") : 1.0;
+  data_cfg.max_zoom = augment ? args.real("max-zoom") : 1.0;
   data_cfg.validate();
   if (tcfg.loss.top_k > data_cfg.views_loss) {
     throw std::invalid_argument("--top-k " + std::to_string(tcfg.loss.top_k) + " exceeds --views-loss " +
@@ -547,6 +556,12 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
   run.distributed = distributed;
   run.options["world-size"] = std::to_string(distributed.world_size);  // the job's size, however it was given
   run.options.erase("rank");
+  // The zoom range is recorded only when it is not the default, so that runs of versions before
+  // the options (which zoomed by 1-1.25) still resume.
+  if (args.real("min-zoom") == 1.0 && args.real("max-zoom") == 1.25) {
+    run.options.erase("min-zoom");
+    run.options.erase("max-zoom");
+  }
   umvs::TrainingRun training(run, open_data, std::cerr);
 
   const int64_t to_do = std::max<int64_t>(0, run.steps - training.step());

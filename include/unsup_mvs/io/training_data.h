@@ -20,10 +20,12 @@ struct TupleConfig {
   int width = 640;      // network input size (multiples of 32); 0 = the reference's size rounded down
   int height = 512;
   int num_depth = 128;  // only to resolve cam files that give DEPTH_MIN and DEPTH_INTERVAL alone
-  // Augmentation (training only): zoom in by a random factor in [1, max_zoom] and crop at a
+  // Augmentation (training only): zoom in by a random factor in [min_zoom, max_zoom] and crop at a
   // random offset (intrinsics follow), then one photometric jitter for all views of the tuple:
   // contrast and per-channel gain in [1 - jitter, 1 + jitter], brightness in [-jitter/2, jitter/2].
-  double max_zoom = 1.25;
+  // Zoom 1 scales the image to just cover width x height; a zoom of (image width / width) crops at
+  // the image's own pixel scale (e.g. 2 for 640x512 images trained at 320x256).
+  double min_zoom = 1.0, max_zoom = 1.25;
   double jitter = 0.1;
   // Exposure augmentation (training only): after the jitter, all views of the tuple are
   // multiplied by one gain drawn log-uniformly from [min_gain, max_gain] and clipped at 1, as a
