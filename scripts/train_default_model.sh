@@ -34,6 +34,10 @@
 #   3. GPU:  DEVICE=cuda WIDTH=640 HEIGHT=512 NUM_DEPTH=128 RENDER_WIDTH=640 RENDER_HEIGHT=512
 #            SUPERVISED_SHARE=0.5 LR=5e-4 LR_SCHEDULE=cosine STEPS=2629 MAX_MINUTES=5.27 INIT=<2>
 #            (stopped by time at step 2,357), weights exported with --steps 0.
+# A fourth, CPU run on crops at the renders' own scale (WIDTH=320 HEIGHT=256 NUM_DEPTH=128
+# RENDER_WIDTH=640 RENDER_HEIGHT=512 MIN_ZOOM=2 MAX_ZOOM=2.5 SCENES_PER_RECIPE=16
+# SUPERVISED_SHARE=0.5 LR=2e-4 LR_SCHEDULE=cosine STEPS=2400 THREADS=2 INIT=<3>, 52 minutes on
+# 2 cores) is better before adaptation but not shipped (docs/results.md, 2026-12-04).
 # On a GPU machine without apt, build UMVS with scripts/build_portable.sh and pass the textures of
 # scripts/portable_deps.sh --textures (README, "Building").
 set -euo pipefail
