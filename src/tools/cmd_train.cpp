@@ -360,7 +360,7 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
       .option("min-zoom", "1",
               "augmentation: smallest zoom of the random crop (1 = each image scaled to just cover --width x "
               "--height; the images' width / --width crops at their own pixel scale, e.g. 2 for 640x512 images "
-              "at --width 320: the scale of use at a quarter of the cost)")
+              "at --width 320: the pixel scale of use, with a quarter of the pixels per step)")
       .option("max-zoom", "1.25", "augmentation: largest zoom of the random crop")
       .option("jitter", "0.1", "photometric jitter strength")
       .option("seed", "1", "seed of the initial weights and of the data order")
