@@ -16,7 +16,8 @@
 #                ADAPT ("photometric self": photometric, and plain self-training (--anchor-unconfirmed 0);
 #                also "confident", self-training as umvs train does it by default (anchored
 #                where the start model is confident, --anchor-min-confidence 0.5), "anchored",
-#                every unconfirmed pixel anchored (the default before 2026-12-03), and
+#                every unconfirmed pixel anchored (the default before 2026-12-03), "unseen",
+#                "confident" plus the pixels no loss view sees (--anchor-unseen 1), and
 #                "aggressive", 10x the learning rate),
 #                SCENES ("room:301 facade:302 dtu_like:303": `umvs synth` recipe:seed),
 #                SERVED (models/unsup_mvsnet.pt),
@@ -49,8 +50,9 @@ adapt_args() {
     self) echo "--self-training-every 25 --anchor-unconfirmed 0" ;;
     anchored) echo "--self-training-every 25 --anchor-unconfirmed 1 --anchor-min-confidence 0" ;;
     confident) echo "--self-training-every 25 --anchor-unconfirmed 1 --anchor-min-confidence 0.5" ;;
+    unseen) echo "--self-training-every 25 --anchor-unconfirmed 1 --anchor-min-confidence 0.5 --anchor-unseen 1" ;;
     aggressive) echo "--lr 1e-2" ;;
-    *) echo "unknown adaptation '$1' (photometric | self | anchored | confident | aggressive)" >&2; return 1 ;;
+    *) echo "unknown adaptation '$1' (photometric | self | anchored | confident | unseen | aggressive)" >&2; return 1 ;;
   esac
 }
 

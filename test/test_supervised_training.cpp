@@ -12,6 +12,7 @@
 
 #include "test_util.h"
 #include "unsup_mvs/core/depth_estimator.h"
+#include "unsup_mvs/core/geometry.h"
 #include "unsup_mvs/core/keyframe_pose_refiner.h"
 #include "unsup_mvs/core/losses.h"
 #include "unsup_mvs/core/metrics.h"
@@ -433,6 +434,73 @@ TEST(SelfTraining, AnchorsCanBeLimitedToConfidentPixels) {
   }
 }
 
+TEST(SelfTraining, SeenByLossViewsIsWhereThePhotometricLossCompares) {
+  // The pixels seen_by_loss_views marks are exactly those the loss's inverse warp finds valid in
+  // at least one loss view (at the same depth).
+  auto tuples = unlabelled_room_tuples("seen_by_loss_views", 44);
+  auto model = load_model(default_model(), torch::kCPU).model;
+  const auto depth = reference_depths(model, tuples, 32, torch::kCPU);
+  // A tuple whose loss views are its reference with the principal point moved half a width: the
+  // right half of the reference falls outside each of them.
+  TrainingTuple shifted = tuples[0];
+  for (auto& v : shifted.loss_views) {
+    v = shifted.network_views[0];
+    v.camera.K(0, 2) += v.camera.width / 2.0;
+  }
+  tuples.push_back(shifted);
+  std::vector<torch::Tensor> depths = depth;
+  depths.push_back(depth[0]);
+  int64_t seen_total = 0, unseen_total = 0;
+  for (size_t i = 0; i < tuples.size(); ++i) {
+    const auto seen = seen_by_loss_views(tuples[i], depths[i]);
+    const auto batch = make_training_batch({tuples[i]}, 32, DepthSampling::kUniformDepth, torch::kCPU);
+    auto valid = torch::zeros_like(seen);
+    for (int64_t m = 0; m < batch.loss_src.size(1); ++m) {
+      const auto w = inverse_warp(batch.loss_src.select(1, m), batch.K_ref, batch.K_src.select(1, m),
+                                  batch.T_src_ref.select(1, m), depths[i].unsqueeze(0));
+      valid |= w.valid[0][0] > 0.5;
+    }
+    EXPECT_TRUE(torch::equal(seen, valid)) << tuples[i].name << ": " << seen.sum().item<int64_t>() << " seen against "
+                                           << valid.sum().item<int64_t>() << " valid";
+    seen_total += seen.sum().item<int64_t>();
+    unseen_total += (~seen).sum().item<int64_t>();
+  }
+  const auto half = seen_by_loss_views(shifted, depth[0]);
+  // Away from the image's edges, where float rounding decides.
+  const int64_t h = half.size(0), w = half.size(1);
+  EXPECT_TRUE(half.slice(0, 1, h - 1).slice(1, 0, w / 2 - 1).all().item<bool>()) << "the left half is seen";
+  EXPECT_FALSE(half.slice(1, w / 2 + 1, w).any().item<bool>()) << "the right half is not";
+  EXPECT_GT(seen_total, 100);
+  EXPECT_GT(unseen_total, 100);
+  EXPECT_THROW(seen_by_loss_views(tuples[0], torch::ones({3, 3})), std::invalid_argument);
+}
+
+TEST(SelfTraining, AnchorsCanAddThePixelsNoLossViewSees) {
+  // With keep_unseen, the floor's anchors plus every pixel no loss view sees keep the start depth.
+  auto tuples = unlabelled_room_tuples("anchored_unseen", 45);
+  TrainingTuple shifted = tuples[0];  // half of its reference outside its loss views, as above
+  for (auto& v : shifted.loss_views) {
+    v = shifted.network_views[0];
+    v.camera.K(0, 2) += v.camera.width / 2.0;
+  }
+  tuples.push_back(shifted);
+  auto model = load_model(default_model(), torch::kCPU).model;
+  const auto all = reference_depths(model, tuples, 32, torch::kCPU);
+  const auto confident = reference_depths(model, tuples, 32, torch::kCPU, 0.9);
+  const auto with_unseen = reference_depths(model, tuples, 32, torch::kCPU, 0.9, true);
+  int64_t added = 0;
+  for (size_t i = 0; i < tuples.size(); ++i) {
+    const auto expected = confident[i].gt(0) | seen_by_loss_views(tuples[i], all[i]).logical_not();
+    EXPECT_TRUE(torch::equal(with_unseen[i].gt(0), expected)) << tuples[i].name;
+    EXPECT_TRUE(torch::equal(with_unseen[i].masked_select(expected), all[i].masked_select(expected))) << tuples[i].name;
+    added += (with_unseen[i].gt(0) & confident[i].eq(0)).sum().item<int64_t>();
+  }
+  EXPECT_GT(added, 100) << "the unconfident pixels outside the loss views are anchored too";
+  // Without a floor every pixel is anchored anyway.
+  const auto every = reference_depths(model, tuples, 32, torch::kCPU, 0.0, true);
+  for (size_t i = 0; i < tuples.size(); ++i) EXPECT_TRUE(torch::equal(every[i], all[i]));
+}
+
 TEST(SelfTraining, AnchoredRunKeepsItsStartModelAndResumesWithinARoundExactly) {
   const std::string data = write_room("anchored_run", 52, false);
   const std::string out = test::temp_dir("anchored_run_out");  // fresh and empty
@@ -517,6 +585,17 @@ TEST(SelfTraining, AnchoredRunKeepsItsStartModelAndResumesWithinARoundExactly) {
   EXPECT_NE(file_text(out + "/confident/run_config.txt").find("\nanchor-min-confidence=0.7\n"), std::string::npos);
   EXPECT_EQ(file_text(out + "/whole/run_config.txt").find("anchor-min-confidence"), std::string::npos)
       << "a run without self-training has no anchors to floor";
+  // --anchor-unseen adds to a floor's anchors: refused without one, recorded only when on.
+  EXPECT_NE(train(anchored + " --anchor-min-confidence 0 --anchor-unseen 1 --steps 2 --out " + out + "/refused"), 0);
+  EXPECT_NE(file_text(log).find("--anchor-unseen adds pixels"), std::string::npos) << file_text(log);
+  EXPECT_NE(train(anchored + " --anchor-unseen 2 --steps 2 --out " + out + "/refused"), 0);
+  EXPECT_NE(file_text(log).find("--anchor-unseen must be 0 or 1"), std::string::npos) << file_text(log);
+  EXPECT_FALSE(std::filesystem::exists(out + "/refused"));
+  ASSERT_EQ(train(anchored + " --anchor-unseen 1 --steps 1 --out " + out + "/unseen"), 0) << file_text(log);
+  EXPECT_NE(file_text(log).find("where its confidence is at least 0.5 or no loss view sees them"), std::string::npos)
+      << file_text(log);
+  EXPECT_NE(file_text(out + "/unseen/run_config.txt").find("\nanchor-unseen=1\n"), std::string::npos);
+  EXPECT_EQ(file_text(out + "/confident/run_config.txt").find("anchor-unseen"), std::string::npos);
   // An anchored run without a recorded floor (0, as every anchored run before the 0.5 default)
   // resumed without the option continues with its own floor and ends where it would have.
   const std::string every_pixel = anchored + " --anchor-min-confidence 0";

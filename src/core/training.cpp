@@ -390,19 +390,45 @@ FusionConfig adaptation_judge_rule() {
 }
 
 std::vector<torch::Tensor> reference_depths(MvsNet& model, const std::vector<TrainingTuple>& tuples, int num_depth,
-                                            const torch::Device& device, double min_confidence) {
+                                            const torch::Device& device, double min_confidence, bool keep_unseen) {
   const bool was_training = model->is_training();
   DepthEstimator estimator = eval_estimator(model, num_depth, device);
   std::vector<torch::Tensor> depths;
   for (const auto& t : tuples) {
     t.validate();
     const auto estimate = estimator.estimate(input_with_reference(t, tuple_views(t), 0), t.depth_min, t.depth_max);
-    depths.push_back(min_confidence > 0.0
-                         ? torch::where(estimate.confidence >= min_confidence, estimate.depth, torch::zeros_like(estimate.depth))
-                         : estimate.depth);
+    if (min_confidence <= 0.0) {
+      depths.push_back(estimate.depth);
+      continue;
+    }
+    auto kept = estimate.confidence >= min_confidence;
+    if (keep_unseen) kept = kept | seen_by_loss_views(t, estimate.depth).logical_not().to(kept.device());
+    depths.push_back(torch::where(kept, estimate.depth, torch::zeros_like(estimate.depth)));
   }
   model->train(was_training);
   return depths;
+}
+
+torch::Tensor seen_by_loss_views(const TrainingTuple& t, const torch::Tensor& depth) {
+  const Camera ref = depth_map_camera(t.network_views.at(0).camera);
+  if (depth.dim() != 2 || depth.size(0) != ref.height || depth.size(1) != ref.width) {
+    throw std::invalid_argument("seen_by_loss_views: tuple " + t.name + " has a " + std::to_string(ref.width) + "x" +
+                                std::to_string(ref.height) + " depth grid, got a map of " +
+                                std::to_string(depth.dim() == 2 ? depth.size(1) : -1) + "x" +
+                                std::to_string(depth.dim() == 2 ? depth.size(0) : -1));
+  }
+  const auto d = depth.to(torch::kCPU, torch::kFloat32).unsqueeze(0);
+  const auto K_ref = intrinsics_tensor(ref).unsqueeze(0);
+  auto seen = torch::zeros({ref.height, ref.width}, torch::kBool);
+  for (const auto& v : t.loss_views) {
+    const Camera src = depth_map_camera(v.camera);
+    const auto p = project_to_source(K_ref, intrinsics_tensor(src).unsqueeze(0),
+                                     relative_pose_tensor(ref, src).unsqueeze(0), d);
+    const auto u = p.uv.select(3, 0)[0], w = p.uv.select(3, 1)[0];
+    // The photometric loss's own test (inverse_warp): inside the image, in front of the camera.
+    seen |= (u >= 0) & (u <= src.width - 1) & (w >= 0) & (w <= src.height - 1) & (p.z[0] > 1e-6) & (d[0] > 0);
+  }
+  return seen;
 }
 
 std::vector<TrainingTuple> pseudo_labelled_tuples(MvsNet& model, const std::vector<TrainingTuple>& tuples,

@@ -359,12 +359,13 @@ void TrainingRun::prepare_anchor() {
     anchor = load_model(path, config_.device).model;
   }
   anchor_depth_ = reference_depths(anchor, to_label_, config_.trainer.num_depth, config_.device,
-                                   config_.anchor_min_confidence);
+                                   config_.anchor_min_confidence, config_.anchor_unseen);
   messages_ << "anchored self-training: the pixels no view confirms keep the depth of step 0";
   if (config_.anchor_min_confidence > 0.0) {
     int64_t kept = 0, all = 0;
     for (const auto& d : anchor_depth_) kept += d.gt(0).sum().item<int64_t>(), all += d.numel();
-    messages_ << " where its confidence is at least " << config_.anchor_min_confidence << " ("
+    messages_ << " where its confidence is at least " << config_.anchor_min_confidence
+              << (config_.anchor_unseen ? " or no loss view sees them" : "") << " ("
               << 100.0 * static_cast<double>(kept) / static_cast<double>(std::max<int64_t>(all, 1)) << "% of the reference pixels)";
   }
   messages_ << "\n";

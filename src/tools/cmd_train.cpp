@@ -325,6 +325,9 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
               "anchored self-training: anchor only the pixels the starting model gave at least this confidence "
               "(the others are left to the photometric loss; 0 = every unconfirmed pixel, the default before "
               "2026-12-03)")
+      .option("anchor-unseen", "0",
+              "anchored self-training with a confidence floor: 1 = also anchor, whatever their confidence, the "
+              "pixels that no loss view sees at the starting model's depth (the photometric loss cannot judge them)")
       .option("min-gain", "1", "exposure augmentation: lowest gain applied to a whole tuple (log-uniform draw)")
       .option("max-gain", "1", "exposure augmentation: highest gain (clipped at white)")
       .option("input-normalization", "per_image_channel",
@@ -437,6 +440,15 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
   if (args.given("anchor-min-confidence") && !(self_training && anchor == "1")) {
     throw std::invalid_argument("--anchor-min-confidence chooses which pixels anchored self-training anchors: give "
                                 "--self-training-every N (and not --anchor-unconfirmed 0)");
+  }
+  const std::string anchor_unseen = args.str("anchor-unseen");
+  if (anchor_unseen != "0" && anchor_unseen != "1") {
+    throw std::invalid_argument("--anchor-unseen must be 0 or 1, got '" + anchor_unseen + "'");
+  }
+  if (args.given("anchor-unseen") && !(self_training && anchor == "1" && anchor_min_confidence > 0.0)) {
+    throw std::invalid_argument("--anchor-unseen adds pixels to the anchored ones of a run with a confidence floor: give "
+                                "--self-training-every N and an --anchor-min-confidence above 0 (and not "
+                                "--anchor-unconfirmed 0)");
   }
   const bool augment = args.integer("augment") != 0;
   if (!augment && (args.given("min-zoom") || args.given("max-zoom"))) {
@@ -552,6 +564,10 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
   // before the option) resume.
   run.options.erase("anchor-min-confidence");
   if (run.anchor_min_confidence > 0.0) run.options["anchor-min-confidence"] = args.str("anchor-min-confidence");
+  run.anchor_unseen = run.anchor_min_confidence > 0.0 && anchor_unseen == "1";
+  // Recorded only when on, so that runs of versions before the option resume.
+  run.options.erase("anchor-unseen");
+  if (run.anchor_unseen) run.options["anchor-unseen"] = "1";
   run.device = device;
   run.distributed = distributed;
   run.options["world-size"] = std::to_string(distributed.world_size);  // the job's size, however it was given

@@ -187,8 +187,16 @@ std::vector<TrainingTuple> pseudo_labelled_tuples(MvsNet& model, const std::vect
 
 // Each tuple's reference depth map as `model` infers it for depth_consistency (eval mode, no gradients).
 // Pixels whose confidence is below `min_confidence` get 0 (as a label: none); 0 keeps every pixel.
+// With `keep_unseen`, a pixel that no loss view sees at that depth keeps it whatever its
+// confidence: the photometric loss cannot judge such a pixel, so freeing it only lets it drift.
 std::vector<torch::Tensor> reference_depths(MvsNet& model, const std::vector<TrainingTuple>& tuples, int num_depth,
-                                            const torch::Device& device, double min_confidence = 0.0);
+                                            const torch::Device& device, double min_confidence = 0.0,
+                                            bool keep_unseen = false);
+
+// The reference pixels that at least one of `t`'s loss views sees with depth `depth` (the
+// reference depth map on the depth grid, [h,w]): inside that view's image and in front of it,
+// the pixels the photometric loss compares. Occlusion is not tested.  -> bool [h,w]
+torch::Tensor seen_by_loss_views(const TrainingTuple& t, const torch::Tensor& depth);
 
 // LibTorch's default CPU generator state as bytes and back (exact resume).
 std::string torch_rng_state();

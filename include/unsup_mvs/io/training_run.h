@@ -59,6 +59,9 @@ struct TrainingRunConfig {
   // Anchor only the pixels the start model gave at least this confidence (0 = all): an unconfident
   // guess is no depth worth keeping, and where views rarely overlap nearly every pixel is one.
   double anchor_min_confidence = 0.0;
+  // With a floor: anchor also the pixels no loss view sees at the start model's depth, whatever
+  // their confidence (core/training.h, seen_by_loss_views): the photometric loss cannot judge them.
+  bool anchor_unseen = false;
   // < 1 (needs init): at the end of the run also write OUT/blended.pt, this share of best.pt's
   // weights plus the rest of init's (core/weight_blend.h); 1 = off.
   double fine_tuned_share = 1.0;
