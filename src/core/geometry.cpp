@@ -179,8 +179,12 @@ InverseWarp inverse_warp(const torch::Tensor& src_image, const torch::Tensor& K_
                                    .mode(torch::kBilinear)
                                    .padding_mode(torch::kZeros)
                                    .align_corners(true));
-  auto valid = (u >= 0) & (u <= W - 1) & (v >= 0) & (v <= H - 1) & (p.z > 1e-6);
-  return {warped, valid.unsqueeze(1).to(src_image.scalar_type())};
+  return {warped, inside_source(p, W, H).unsqueeze(1).to(src_image.scalar_type())};
+}
+
+torch::Tensor inside_source(const SourceProjection& p, int64_t width, int64_t height) {
+  auto u = p.uv.select(3, 0), v = p.uv.select(3, 1);
+  return (u >= 0) & (u <= width - 1) & (v >= 0) & (v <= height - 1) & (p.z > 1e-6);
 }
 
 }  // namespace umvs

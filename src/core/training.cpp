@@ -424,9 +424,7 @@ torch::Tensor seen_by_loss_views(const TrainingTuple& t, const torch::Tensor& de
     const Camera src = depth_map_camera(v.camera);
     const auto p = project_to_source(K_ref, intrinsics_tensor(src).unsqueeze(0),
                                      relative_pose_tensor(ref, src).unsqueeze(0), d);
-    const auto u = p.uv.select(3, 0)[0], w = p.uv.select(3, 1)[0];
-    // The photometric loss's own test (inverse_warp): inside the image, in front of the camera.
-    seen |= (u >= 0) & (u <= src.width - 1) & (w >= 0) & (w <= src.height - 1) & (p.z[0] > 1e-6) & (d[0] > 0);
+    seen |= inside_source(p, src.width, src.height)[0];  // the photometric loss's own test
   }
   return seen;
 }

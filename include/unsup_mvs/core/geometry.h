@@ -61,6 +61,10 @@ struct SourceProjection {
 SourceProjection project_to_source(const torch::Tensor& K_ref, const torch::Tensor& K_src,
                                    const torch::Tensor& T_src_ref, const torch::Tensor& depth);
 
+// Where a projection lands inside a width x height source image, in front of the camera: the
+// pixels the photometric loss compares (inverse_warp's `valid`).  -> bool [B,H,W]
+torch::Tensor inside_source(const SourceProjection& p, int64_t width, int64_t height);
+
 // The part of MVSNet's homography that does not depend on depth: for every reference pixel
 // (x, y) at feature resolution, rot_xyz = R (x, y, 1)^T and trans = t, where [R | t] are the top
 // rows of src_proj * ref_proj^-1. The source point of depth d is rot_xyz * d + trans.
