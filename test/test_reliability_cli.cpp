@@ -266,7 +266,8 @@ TEST(InferArguments, BadSourceOptionsAreRefusedByName) {
   const std::string model = random_model(dir + "/model.pt");
   const std::string common = "infer --data " + data + " --checkpoint " + model + " --threads 1 --ref 0 --out " + dir + "/bad";
   for (const std::string bad : {" --source-rotation-search -1", " --source-rotation-search nan",
-                                " --source-combination bogus"}) {
+                                " --source-combination bogus", " --complete-below-confidence 1",
+                                " --complete-below-confidence -0.5"}) {
     Result r = run_umvs(common + bad);
     EXPECT_EQ(r.status, 2) << bad << ": " << r.output;
     EXPECT_TRUE(contains(r.output, bad.substr(1, bad.find(' ', 1) - 1)) || contains(r.output, "bogus")) << r.output;

@@ -97,6 +97,7 @@ void DepthEstimatorConfig::validate() const {
     throw std::invalid_argument("source_rotation_search_deg must be an angle >= 0 (0 = off), got " +
                                 std::to_string(source_rotation_search_deg));
   }
+  completion.validate();
 }
 
 DepthEstimator::DepthEstimator(MvsNet model, torch::Device device, DepthEstimatorConfig config)
@@ -232,6 +233,13 @@ DepthMap DepthEstimator::estimate(const std::vector<ViewInput>& views, double de
   map.depth = out.depth.squeeze(0).to(torch::kCPU);
   map.confidence = out.confidence.squeeze(0).to(torch::kCPU);
   map.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  if (config_.completion.enabled()) {
+    const auto t1 = std::chrono::steady_clock::now();
+    // The guide is the reference's grey level averaged over each depth pixel's 4x4 input pixels.
+    const auto guide = torch::avg_pool2d(images.front().unsqueeze(0), 4).squeeze(0).mean(0);
+    map.depth = complete_depth(map.depth, map.confidence, guide, config_.completion, &map.completion);
+    map.completion_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count();
+  }
   map.network_camera = cameras.front();
   map.camera = depth_map_camera(cameras.front());
   map.color = float_to_rgb8(images.front().slice(1, 0, plan.height, 4).slice(2, 0, plan.width, 4));

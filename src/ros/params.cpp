@@ -61,6 +61,11 @@ umvs::FusionConfig fusion_config_from_ros(const ros::NodeHandle& nh) {
 
 void InferenceNodeConfig::validate() const {
   umvs::parse_device(device);
+  const double completion = estimator.completion.min_confidence;
+  if (!(completion >= 0.0 && completion < 1.0)) {
+    throw std::invalid_argument("complete_below_confidence must be a confidence in [0,1) (0 = off), got " +
+                                std::to_string(completion));
+  }
   estimator.validate();
   // The network input is cropped to multiples of 32: a smaller bound leaves no image.
   for (const auto& [name, size] : {std::pair<const char*, int>{"max_width", estimator.max_width},
@@ -98,6 +103,7 @@ InferenceNodeConfig inference_node_config_from_ros(const ros::NodeHandle& nh) {
   nh.param("source_combination", source_combination, source_combination);
   c.estimator.source_combination = umvs::source_combination_from_string(source_combination);
   nh.param("source_rotation_search_deg", c.estimator.source_rotation_search_deg, c.estimator.source_rotation_search_deg);
+  nh.param("complete_below_confidence", c.estimator.completion.min_confidence, c.estimator.completion.min_confidence);
   nh.param("rectified", c.rectified, c.rectified);
   nh.param("checkpoint", c.checkpoint, c.checkpoint);
   nh.param("max_image_pixels", c.max_image_pixels, c.max_image_pixels);

@@ -57,6 +57,10 @@ UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
               "correct each source's orientation by up to this many degrees about each axis: the turn with which "
               "the source warps best onto the reference, kept when clearly better than the pose as given (poses a "
               "few tenths of a degree off; about 30 half-size passes per source; 0 = off)")
+      .option("complete-below-confidence", "0",
+              "replace the depth of pixels below this confidence by what the confident pixels around them imply "
+              "(edge-aware, a wall is filled as a plane; for dense depth maps where the network has no evidence: plain walls, "
+              "parts no source sees; 0.7 as measured in docs/results.md; the confidence maps stay as the network gave them; 0 = off)")
       .option("num-depth", "0", "depth planes (multiple of 8; 0 = 128 at 640 wide, scaled with the width)")
       .option("depth-sampling", "", "depth|inverse_depth (default: the checkpoint's)")
       .option("feature-warp", "", "exact|mvsnet_pytorch: where the cost volume samples the source views (default: the checkpoint's)")
@@ -89,6 +93,11 @@ UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
   cfg.max_width = args.integer("max-width");
   cfg.max_height = args.integer("max-height");
   cfg.source_rotation_search_deg = args.real("source-rotation-search");
+  cfg.completion.min_confidence = args.real("complete-below-confidence");
+  if (!(cfg.completion.min_confidence >= 0 && cfg.completion.min_confidence < 1)) {
+    throw std::invalid_argument("--complete-below-confidence must be a confidence in [0,1) (0 = off), got " +
+                                args.str("complete-below-confidence"));
+  }
   if (!std::isfinite(cfg.source_rotation_search_deg) || cfg.source_rotation_search_deg < 0) {
     throw std::invalid_argument("--source-rotation-search must be an angle >= 0 in degrees (0 = off), got " +
                                 args.str("source-rotation-search"));
@@ -182,7 +191,9 @@ UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
     }
     umvs::write_pfm(written.depth_path(ref), map.depth);
     umvs::write_pfm(written.confidence_path(ref), map.confidence);
-    umvs::write_png(written.depth_preview_path(ref), umvs::colorize(map.depth, dmin, dmax, map.confidence > 0.5));
+    // The preview hides unsure pixels, unless they were completed.
+    const auto shown = cfg.completion.enabled() ? map.depth > 0 : map.confidence > 0.5;
+    umvs::write_png(written.depth_preview_path(ref), umvs::colorize(map.depth, dmin, dmax, shown));
     umvs::write_png(written.confidence_preview_path(ref),
                     map.confidence.mul(255).round().clamp(0, 255).to(torch::kUInt8));
     umvs::write_png(written.image_path(ref), map.color);
@@ -195,9 +206,14 @@ UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
     umvs::write_cam_file(written.cam_path(ref), out_cam);
     out_pairs.push_back(pair);
     ++done;
-    char extra[96];
-    std::snprintf(extra, sizeof(extra), "view %d: %.2f s, conf>0.8 %.1f%%", ref, map.seconds,
-                  100.0 * (map.confidence > 0.8).to(torch::kFloat32).mean().item<double>());
+    char extra[160];
+    int used = std::snprintf(extra, sizeof(extra), "view %d: %.2f s, conf>0.8 %.1f%%", ref, map.seconds,
+                             100.0 * (map.confidence > 0.8).to(torch::kFloat32).mean().item<double>());
+    if (cfg.completion.enabled() && used > 0 && used < static_cast<int>(sizeof(extra))) {
+      std::snprintf(extra + used, sizeof(extra) - used, ", completed %.1f%% in %.2f s%s",
+                    100.0 * map.completion.completed_share, map.completion_seconds,
+                    map.completion.converged ? "" : " (not converged)");
+    }
     progress.update(done + skipped, extra);
   }
   progress.finish();

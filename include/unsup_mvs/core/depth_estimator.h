@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "unsup_mvs/core/camera.h"
+#include "unsup_mvs/core/depth_completion.h"
 #include "unsup_mvs/core/fast_mvsnet.h"
 #include "unsup_mvs/core/mvsnet.h"
 
@@ -47,6 +48,9 @@ struct DepthEstimatorConfig {
   // times the time of a map, and it corrects each source for one reference only, not the poses
   // fusion uses.
   double source_rotation_search_deg = 0.0;
+  // Completion of the pixels below a confidence floor from the confident ones (core/depth_completion.h;
+  // off by default). The confidence map is left as the network gave it.
+  DepthCompletionConfig completion;
 
   void validate() const;  // throws std::invalid_argument naming the field
 };
@@ -81,6 +85,8 @@ struct DepthMap {
   Camera network_camera;     // camera of the network input image (after resize and crop)
   double depth_min = 0.0, depth_max = 0.0;
   double seconds = 0.0;      // network time, including transfers (all passes)
+  double completion_seconds = 0.0;   // DepthEstimatorConfig::completion's time (0 when off)
+  DepthCompletionStats completion;   // what it did (zeros when off)
   MvsStageTimes stages;      // where the first pass's network time went (CPU fast path only)
   // Per source view, what DepthEstimatorConfig::source_rotation_search_deg did (empty when off).
   std::vector<SourceTurn> source_turns;
