@@ -50,7 +50,7 @@ struct DepthEstimatorConfig {
   double source_rotation_search_deg = 0.0;
   // Completion of the pixels below a confidence floor from the confident ones (core/depth_completion.h;
   // off by default). The confidence map is left as the network gave it.
-  DepthCompletionConfig completion;
+  DepthCompletionConfig completion = {};
 
   void validate() const;  // throws std::invalid_argument naming the field
 };
