@@ -14,7 +14,9 @@
 #              DEMO_RATE (playback factor, 0.25: slow enough for a 2-core CPU to infer every
 #              keyframe at that size), DEMO_RVIZ (1; 0 = no RViz, no screenshot), CHECKPOINT (default model),
 #              DEMO_TEXTURES (none: procedural textures, the same scene on every machine; `installed`
-#              after scripts/install_textures.sh renders photographs, a different scene with other scores).
+#              after scripts/install_textures.sh renders photographs, a different scene with other scores),
+#              DEMO_COMPLETION (empty: inference_config's, off; e.g. 0.7: the inference nodelet's
+#              ~complete_below_confidence, docs/ros.md).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$PWD
@@ -28,6 +30,7 @@ PLANES=${DEMO_PLANES:-128}
 RATE=${DEMO_RATE:-0.25}
 RVIZ=${DEMO_RVIZ:-1}
 TEXTURES=${DEMO_TEXTURES:-none}
+COMPLETION=${DEMO_COMPLETION:-}
 CHECKPOINT=$(realpath "${CHECKPOINT:-$ROOT/models/unsup_mvsnet.pt}")
 start=$(date +%s)
 say() { echo "[demo $(($(date +%s) - start))s] $*"; }
@@ -67,7 +70,8 @@ if [[ "$RVIZ" == 1 ]]; then
 fi
 say "replaying at ${RATE}x through replay.launch with $CHECKPOINT, inference at ${WIDTH}x$HEIGHT, $PLANES planes (log: $WORK/launch.log)"
 roslaunch -p "${ROS_MASTER_URI##*:}" unsup_mvs replay.launch bag:="$WORK/scene.bag" checkpoint:="$CHECKPOINT" clouds_dir:="$WORK" \
-  max_width:="$WIDTH" max_height:="$HEIGHT" num_depth:="$PLANES" rate:="$RATE" rviz:=$([[ "$RVIZ" == 1 ]] && echo true || echo false) trainer:=false >"$WORK/launch.log" 2>&1 &
+  max_width:="$WIDTH" max_height:="$HEIGHT" num_depth:="$PLANES" rate:="$RATE" rviz:=$([[ "$RVIZ" == 1 ]] && echo true || echo false) trainer:=false \
+  complete_below_confidence:="$COMPLETION" >"$WORK/launch.log" 2>&1 &
 pids+=($!)
 
 # roslaunch logs the player's exit when the bag is done (polling the master is unreliable under load).
