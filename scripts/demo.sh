@@ -15,7 +15,7 @@
 #              keyframe at that size), DEMO_RVIZ (1; 0 = no RViz, no screenshot), CHECKPOINT (default model),
 #              DEMO_TEXTURES (none: procedural textures, the same scene on every machine; `installed`
 #              after scripts/install_textures.sh renders photographs, a different scene with other scores),
-#              DEMO_COMPLETION (empty: inference_config's, off; e.g. 0.7: the inference nodelet's
+#              DEMO_COMPLETION (empty: inference_config's, 0.7; 0 = off: the inference nodelet's
 #              ~complete_below_confidence, docs/ros.md).
 set -euo pipefail
 cd "$(dirname "$0")/.."

@@ -21,6 +21,7 @@
 
 #include "cli_test_util.h"
 #include "test_util.h"
+#include "unsup_mvs/core/depth_completion.h"
 #include "unsup_mvs/core/memory_bounds.h"
 #include "unsup_mvs/io/array_io.h"
 #include "unsup_mvs/io/checkpoint.h"
@@ -273,6 +274,33 @@ TEST(InferArguments, BadSourceOptionsAreRefusedByName) {
     EXPECT_TRUE(contains(r.output, bad.substr(1, bad.find(' ', 1) - 1)) || contains(r.output, "bogus")) << r.output;
     EXPECT_FALSE(fs::exists(dir + "/bad")) << bad;
   }
+}
+
+// Completion is on by default at the recommended floor, and 0 gives the network's own depth; the
+// confidence maps are the network's either way.
+TEST(InferArguments, CompletionIsOnByDefaultAndZeroTurnsItOff) {
+  const std::string dir = test::temp_dir("completion_default");
+  const std::string data = scene("completion_default_data", 160, 128);
+  const std::string common = "infer --data " + data + " --checkpoint " + std::string(UMVS_SOURCE_DIR) +
+                             "/models/unsup_mvsnet.pt --threads 2 --ref 0 --out " + dir;
+  const Result by_default = run_umvs(common + "/default");
+  ASSERT_EQ(by_default.status, 0) << by_default.output;
+  EXPECT_TRUE(contains(by_default.output, "completed")) << by_default.output;
+  ASSERT_EQ(run_umvs(common + "/floor --complete-below-confidence 0.7").status, 0);
+  const Result off = run_umvs(common + "/off --complete-below-confidence 0");
+  ASSERT_EQ(off.status, 0) << off.output;
+  EXPECT_FALSE(contains(off.output, "completed")) << off.output;
+
+  const std::string depth = "/depth_est/00000000.pfm", confidence = "/confidence/00000000.pfm";
+  EXPECT_EQ(file_bytes(dir + "/default" + depth), file_bytes(dir + "/floor" + depth));
+  EXPECT_EQ(file_bytes(dir + "/default" + confidence), file_bytes(dir + "/off" + confidence));
+  const torch::Tensor completed = read_pfm(dir + "/default" + depth), own = read_pfm(dir + "/off" + depth);
+  const torch::Tensor unsure = read_pfm(dir + "/off" + confidence) < kRecommendedCompletionConfidence;
+  const double unsure_share = unsure.to(torch::kFloat).mean().item<double>();
+  ASSERT_GT(unsure_share, 0.05) << "the scene must have unsure pixels for this test";
+  ASSERT_LT(unsure_share, 0.95) << "and confident ones to complete them from";
+  const torch::Tensor moved = ((completed - own).abs() > 1e-3 * own).masked_select(unsure);
+  EXPECT_GT(moved.to(torch::kFloat).mean().item<double>(), 0.5) << "most unsure pixels get a completed depth";
 }
 
 TEST(InferArguments, PlaneCountFollowsTheInputSizeNotTheCheckpoint) {

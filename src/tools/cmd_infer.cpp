@@ -6,7 +6,9 @@
 #include <filesystem>
 #include <iostream>
 #include <map>
+#include <sstream>
 
+#include "unsup_mvs/core/depth_completion.h"
 #include "unsup_mvs/core/depth_estimator.h"
 #include "unsup_mvs/core/device.h"
 #include "unsup_mvs/core/image_ops.h"
@@ -36,6 +38,13 @@ double depth_override(const umvs::Args& args, const char* name) {
   return v;
 }
 
+// The default of --complete-below-confidence as help shows it ("0.7").
+std::string recommended_completion_floor() {
+  std::ostringstream text;
+  text << umvs::kRecommendedCompletionConfidence;
+  return text.str();
+}
+
 }  // namespace
 
 UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
@@ -57,10 +66,11 @@ UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
               "correct each source's orientation by up to this many degrees about each axis: the turn with which "
               "the source warps best onto the reference, kept when clearly better than the pose as given (poses a "
               "few tenths of a degree off; about 30 half-size passes per source; 0 = off)")
-      .option("complete-below-confidence", "0",
+      .option("complete-below-confidence", recommended_completion_floor(),
               "replace the depth of pixels below this confidence by what the confident pixels around them imply "
-              "(edge-aware, a wall is filled as a plane; for dense depth maps where the network has no evidence: plain walls, "
-              "parts no source sees; 0.7 as measured in docs/results.md; the confidence maps stay as the network gave them; 0 = off)")
+              "(edge-aware, a wall is filled as a plane; dense depth maps where the network has no evidence: plain walls, "
+              "parts no source sees; measured in docs/results.md; the confidence maps stay as the network gave them; "
+              "0 = off: the network's own depth)")
       .option("num-depth", "0", "depth planes (multiple of 8; 0 = 128 at 640 wide, scaled with the width)")
       .option("depth-sampling", "", "depth|inverse_depth (default: the checkpoint's)")
       .option("feature-warp", "", "exact|mvsnet_pytorch: where the cost volume samples the source views (default: the checkpoint's)")

@@ -18,6 +18,12 @@
 
 namespace umvs {
 
+// The floor below which `umvs infer` and the inference nodelet complete by default: chosen on
+// rendered scenes, then tested on others and on real images (docs/results.md, twenty-second and
+// twenty-third sessions). The core's own default (DepthCompletionConfig) stays off, so that training,
+// the reload judge and the parity checks see the network's own depth.
+inline constexpr double kRecommendedCompletionConfidence = 0.7;
+
 struct DepthCompletionConfig {
   // Pixels below this confidence are completed from the others; 0 = off.
   double min_confidence = 0.0;

@@ -29,12 +29,20 @@ umvs::KeyframeConfig keyframe_config_from_ros(const ros::NodeHandle& nh);
 umvs::KeyframeStreamConfig keyframe_stream_config_from_ros(const ros::NodeHandle& nh);
 umvs::FusionConfig fusion_config_from_ros(const ros::NodeHandle& nh);
 
+// The inference nodelet's estimator: at most 640x512, planes following the input, the unsure
+// pixels completed from the confident ones (as `umvs infer`).
+inline umvs::DepthEstimatorConfig inference_estimator_defaults() {
+  umvs::DepthEstimatorConfig c{640, 512, 0};
+  c.completion.min_confidence = umvs::kRecommendedCompletionConfidence;
+  return c;
+}
+
 // The inference nodelet's parameters (docs/ros.md), validated: validate() throws
 // std::invalid_argument naming the parameter.
 struct InferenceNodeConfig {
   std::string device = "cpu";
   int threads = 0;                            // 0 = all cores
-  umvs::DepthEstimatorConfig estimator{640, 512, 0};  // max_width, max_height, num_depth (0 = follow the input)
+  umvs::DepthEstimatorConfig estimator = inference_estimator_defaults();
   bool rectified = umvs::KeyframeStreamConfig{}.rectified;  // as the keyframe_selector reads CameraInfo
   std::string checkpoint;
   int max_image_pixels = kDefaultMaxImagePixels;
