@@ -38,6 +38,8 @@
 # RENDER_WIDTH=640 RENDER_HEIGHT=512 MIN_ZOOM=2 MAX_ZOOM=2.5 SCENES_PER_RECIPE=16
 # SUPERVISED_SHARE=0.5 LR=2e-4 LR_SCHEDULE=cosine STEPS=2400 THREADS=2 INIT=<3>, 52 minutes on
 # 2 cores) is better before adaptation but not shipped (docs/results.md, 2026-12-04).
+# A fifth, GPU run from <3> (run 3's settings, SCENES_PER_RECIPE=10, LR=5e-4 or 2e-4, STEPS=1923)
+# gains on rendered scenes and loses on real images: not shipped (docs/results.md, twenty-third session).
 # On a GPU machine without apt, build UMVS with scripts/build_portable.sh and pass the textures of
 # scripts/portable_deps.sh --textures (README, "Building").
 set -euo pipefail
