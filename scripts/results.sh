@@ -23,7 +23,8 @@
 #                EVAL_TUPLES (0 = all): rendered reference views scored (evenly spread),
 #                OLD_REV (default model before issue 13: 6fd5413), COMPLETION (templeRing's
 #                `umvs infer --complete-below-confidence`, 0: the network's own maps, as every
-#                table since stage 3 was measured; 0.7 is infer's default)
+#                table since stage 3 was measured; 0.7 is infer's default), SOURCES (templeRing's
+#                `umvs infer --source-combination`, variance: as the tables were measured)
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
@@ -40,6 +41,7 @@ ADAPT_MODELS="${ADAPT_MODELS:-new mvsnet}"
 ADAPT_TARGETS="${ADAPT_TARGETS:-livingroom templeRing}"
 EVAL_TUPLES="${EVAL_TUPLES:-0}"
 COMPLETION="${COMPLETION:-0}"
+SOURCES="${SOURCES:-variance}"
 [ -x "$UMVS" ] || { echo "umvs not found at $UMVS (set UMVS=/path/to/umvs)" >&2; exit 1; }
 for d in mvsnet_parity livingroom templeRing; do
   [ -d "$SHARED/$d" ] || { echo "needs $SHARED/$d" >&2; exit 1; }
@@ -137,7 +139,7 @@ cell() {
     if [ ! -f "$out.fuse.txt" ]; then
       rm -rf "$out"
       "$UMVS" infer --data "$WORK/data/templeRing" --checkpoint "$ckpt" --out "$out" --num-depth 128 \
-        --complete-below-confidence "$COMPLETION" --threads "$THREADS" >/dev/null 2>&1
+        --complete-below-confidence "$COMPLETION" --source-combination "$SOURCES" --threads "$THREADS" >/dev/null 2>&1
       "$UMVS" fuse --depth "$out" --out "$out.ply" --threads "$THREADS" --bbox "$TEMPLE_BBOX" >"$out.fuse.txt" 2>&1
     fi
     awk '/^fused/ { n = $5 } /inside the bounding box/ { gsub(/[(%)]/, "", $NF); s = $NF }

@@ -16,7 +16,7 @@ mkdir -p "$WORK"
 if [ ! -f "$WORK/out/pair.txt" ]; then
   "$UMVS" import middlebury --data "$SHARED/templeRing" --out "$WORK/data" >/dev/null
   "$UMVS" infer --data "$WORK/data" --checkpoint models/unsup_mvsnet.pt --out "$WORK/out" --num-depth 128 \
-    --complete-below-confidence 0 --threads "$THREADS" | tail -1  # the network's own maps, as documented
+    --source-combination variance --complete-below-confidence 0 --threads "$THREADS" | tail -1  # the network's own maps, as documented
 fi
 row() {  # row LABEL [fuse options]: | label | points | % in box | filter s |
   local label=$1; shift

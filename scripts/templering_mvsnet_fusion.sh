@@ -40,7 +40,8 @@ with open(data + "/pair.txt", "w") as f:
         f.write("%d\n%d %s\n" % (i, len(src), " ".join("%d 1.0" % j for j in src)))
 EOF
 "$UMVS" infer --data "$WORK/data" --checkpoint "$SHARED/mvsnet_parity/mvsnet_pytorch_d192.pt" --out "$WORK/out" \
-  --views 3 --num-depth 128 --complete-below-confidence 0 --threads "$THREADS" | tail -2  # MVSNet's own maps
+  --views 3 --num-depth 128 --source-combination variance --complete-below-confidence 0 --threads "$THREADS" |
+  tail -2  # MVSNet's own maps
 BBOX=-0.023121,-0.038009,-0.091940,0.078626,0.121636,-0.017395
 for rule in mvsnet neighbours; do
   echo "== umvs fuse --source-rule $rule"

@@ -303,6 +303,25 @@ TEST(InferArguments, CompletionIsOnByDefaultAndZeroTurnsItOff) {
   EXPECT_GT(moved.to(torch::kFloat).mean().item<double>(), 0.5) << "most unsure pixels get a completed depth";
 }
 
+// The source combination is auto by default: an untrained model is unsure of every map, so the
+// default adds most_confident's per-source passes and says so; variance keeps the one pass.
+TEST(InferArguments, SourcesAreAutoByDefault) {
+  const std::string dir = test::temp_dir("sources_default");
+  const std::string data = scene("sources_default_data");
+  const std::string model = random_model(dir + "/model.pt");
+  const std::string common = "infer --data " + data + " --checkpoint " + model + " --threads 1 --ref 0 --out " + dir;
+  const Result by_default = run_umvs(common + "/default");
+  ASSERT_EQ(by_default.status, 0) << by_default.output;
+  EXPECT_TRUE(contains(by_default.output, "sources also alone")) << by_default.output;
+  ASSERT_EQ(run_umvs(common + "/most_confident --source-combination most_confident").status, 0);
+  const Result variance = run_umvs(common + "/variance --source-combination variance");
+  ASSERT_EQ(variance.status, 0) << variance.output;
+  EXPECT_FALSE(contains(variance.output, "sources also alone")) << variance.output;
+  const std::string depth = "/depth_est/00000000.pfm";
+  EXPECT_EQ(file_bytes(dir + "/default" + depth), file_bytes(dir + "/most_confident" + depth));
+  EXPECT_NE(file_bytes(dir + "/default" + depth), file_bytes(dir + "/variance" + depth));
+}
+
 TEST(InferArguments, PlaneCountFollowsTheInputSizeNotTheCheckpoint) {
   EXPECT_EQ(default_plane_count(640), 128);   // MVSNet training
   EXPECT_EQ(default_plane_count(1600), 192);  // MVSNet on DTU

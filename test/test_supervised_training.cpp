@@ -741,6 +741,57 @@ TEST(DefaultModel, MostConfidentSourcesResistASourceThatSeesSomethingElse) {
   EXPECT_EQ(source_combination_from_string(to_string(SourceCombination::kMostConfident)), SourceCombination::kMostConfident);
 }
 
+TEST(DefaultModel, AutoSourcesAddThePerSourcePassesOnlyWhereTheVarianceIsUnsure) {
+  // SourceCombination::kAuto keeps the one variance pass where it is confident, byte for byte, and
+  // where a source's image is noise (a camera that sees nothing of the reference's scene) the
+  // variance pass is unsure of most of the map, so auto runs most_confident's passes as well and
+  // its depth is most_confident's, better than the spoiled variance's.
+  const std::string dir = write_room("auto_sources", 73, true);
+  MvsFolderSource source({dir}, room_tuples(2));
+  auto loaded = load_model(default_model(), torch::kCPU);
+  const auto estimator = [&](SourceCombination combination) {
+    DepthEstimatorConfig config;
+    config.source_combination = combination;
+    return DepthEstimator(loaded.model, torch::kCPU, config);
+  };
+  DepthEstimator variance = estimator(SourceCombination::kVariance);
+  DepthEstimator most_confident = estimator(SourceCombination::kMostConfident);
+  DepthEstimator automatic = estimator(SourceCombination::kAuto);
+  const auto confident_share = [](const DepthMap& m) {
+    return (m.confidence >= kAutoConfidentLevel).to(torch::kFloat32).mean().item<double>();
+  };
+  double spoiled_variance = 0, spoiled_auto = 0, least_clean_share = 1, most_spoiled_share = 0;
+  for (size_t i = 0; i < source.size(); i += 2) {
+    const auto t = source.tuple(i, nullptr);
+    ASSERT_EQ(t.network_views.size(), 3u);
+    const DepthMap clean = variance.estimate(t.network_views, t.depth_min, t.depth_max);
+    least_clean_share = std::min(least_clean_share, confident_share(clean));
+    const DepthMap clean_auto = automatic.estimate(t.network_views, t.depth_min, t.depth_max);
+    ASSERT_GE(confident_share(clean), kAutoMinConfidentShare) << "reference " << i;
+    EXPECT_FALSE(clean.per_source_passes);
+    EXPECT_FALSE(clean_auto.per_source_passes) << "reference " << i;
+    EXPECT_TRUE(torch::equal(clean_auto.depth, clean.depth)) << "reference " << i;
+
+    std::vector<ViewInput> spoiled = t.network_views;
+    torch::manual_seed(static_cast<uint64_t>(i));
+    spoiled[2].image = torch::randint(0, 256, spoiled[2].image.sizes(), torch::kUInt8);
+    const DepthMap a = variance.estimate(spoiled, t.depth_min, t.depth_max);
+    const DepthMap b = automatic.estimate(spoiled, t.depth_min, t.depth_max);
+    most_spoiled_share = std::max(most_spoiled_share, confident_share(a));
+    ASSERT_LT(confident_share(a), kAutoMinConfidentShare) << "reference " << i;
+    EXPECT_TRUE(b.per_source_passes) << "reference " << i;
+    EXPECT_TRUE(torch::equal(b.depth, most_confident.estimate(spoiled, t.depth_min, t.depth_max).depth));
+    spoiled_variance += abs_rel_on_depth_grid(a.depth, t.depth_gt);
+    spoiled_auto += abs_rel_on_depth_grid(b.depth, t.depth_gt);
+  }
+  RecordProperty("spoiled_variance", std::to_string(spoiled_variance));
+  RecordProperty("spoiled_auto", std::to_string(spoiled_auto));
+  RecordProperty("least_clean_confident_share", std::to_string(least_clean_share));
+  RecordProperty("most_spoiled_confident_share", std::to_string(most_spoiled_share));
+  EXPECT_LT(spoiled_auto, 0.8 * spoiled_variance);
+  EXPECT_EQ(source_combination_from_string(to_string(SourceCombination::kAuto)), SourceCombination::kAuto);
+}
+
 TEST(DefaultModel, CompletionLowersTheErrorWhereTheNetworkIsUnsure) {
   // The shipped model on a rendered room at its own size (640x512): completing the pixels below
   // confidence 0.7 from the confident ones lowers the depth error (as on every rendered scene

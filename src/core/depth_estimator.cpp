@@ -21,13 +21,19 @@ Camera depth_map_camera(const Camera& network_camera, double scale) {
 }
 
 const char* to_string(SourceCombination c) {
-  return c == SourceCombination::kMostConfident ? "most_confident" : "variance";
+  switch (c) {
+    case SourceCombination::kMostConfident: return "most_confident";
+    case SourceCombination::kAuto: return "auto";
+    case SourceCombination::kVariance: break;
+  }
+  return "variance";
 }
 
 SourceCombination source_combination_from_string(const std::string& s) {
   if (s == "variance") return SourceCombination::kVariance;
   if (s == "most_confident") return SourceCombination::kMostConfident;
-  throw std::invalid_argument("unknown source combination '" + s + "' (expected variance|most_confident)");
+  if (s == "auto") return SourceCombination::kAuto;
+  throw std::invalid_argument("unknown source combination '" + s + "' (expected variance|most_confident|auto)");
 }
 
 namespace {
@@ -220,7 +226,13 @@ DepthMap DepthEstimator::estimate(const std::vector<ViewInput>& views, double de
     const auto planes = depth_values.unsqueeze(0).to(device_);
     out = network_.forward(batch, proj, planes, false, &map.stages);
     const int64_t num_views = batch.size(1);
-    if (config_.source_combination == SourceCombination::kMostConfident && num_views > 2) {
+    const auto unsure_map = [&] {
+      return (out.confidence >= kAutoConfidentLevel).to(torch::kFloat32).mean().item<double>() < kAutoMinConfidentShare;
+    };
+    map.per_source_passes =
+        num_views > 2 && (config_.source_combination == SourceCombination::kMostConfident ||
+                          (config_.source_combination == SourceCombination::kAuto && unsure_map()));
+    if (map.per_source_passes) {
       for (int64_t s = 1; s < num_views; ++s) {
         const auto pair = torch::tensor({int64_t{0}, s}, torch::TensorOptions().dtype(torch::kLong).device(device_));
         const MvsOutput alone = network_.forward(batch.index_select(1, pair), proj.index_select(1, pair), planes, false);

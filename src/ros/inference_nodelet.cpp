@@ -279,9 +279,10 @@ class InferenceNodelet : public nodelet::Nodelet {
     const double latency = (ros::Time::now() - header.stamp).toSec();
     ++processed_;
     seconds_sum_ += total;
-    NODELET_INFO_THROTTLE(2.0, "inference: keyframe %u: %dx%d depth map in %.2f s (network %.2f s), %.2f s after the "
+    NODELET_INFO_THROTTLE(2.0, "inference: keyframe %u: %dx%d depth map in %.2f s (network %.2f s%s), %.2f s after the "
                           "image; %ld done, %ld stale sets dropped, %ld failed",
-                          set.reference_id, map.camera.width, map.camera.height, total, map.seconds, latency, processed_,
+                          set.reference_id, map.camera.width, map.camera.height, total, map.seconds,
+                          map.per_source_passes ? ", each source also alone" : "", latency, processed_,
                           static_cast<long>(pending_->dropped()), failed_.load());
     for (size_t s = 0; s < map.source_turns.size(); ++s) {
       const umvs::SourceTurn& turn = map.source_turns[s];

@@ -59,9 +59,11 @@ UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
       .required("checkpoint", "model: our checkpoint or MVSNet_pytorch weights")
       .required("out", "output folder")
       .option("views", "3", "views per depth map (reference + neighbours)")
-      .option("source-combination", "variance",
-              "variance: one pass, MVSNet's variance over all views; most_confident: also one pass per source with "
-              "the reference alone, keeping each pixel's most confident estimate (for far-apart views; 1 + neighbours passes)")
+      .option("source-combination", umvs::to_string(umvs::kRecommendedSourceCombination),
+              "auto: MVSNet's one variance pass over all views, plus most_confident's passes on the maps where that "
+              "pass is unsure (confidence >= 0.5 on fewer than 20 % of the pixels: far-apart views whose sources "
+              "disagree); variance: that one pass only; most_confident: also one pass per source with the reference "
+              "alone on every map, each pixel keeping its most confident estimate (1 + neighbours passes)")
       .option("source-rotation-search", "0",
               "correct each source's orientation by up to this many degrees about each axis: the turn with which "
               "the source warps best onto the reference, kept when clearly better than the pose as given (poses a "
@@ -219,6 +221,10 @@ UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
     char extra[160];
     int used = std::snprintf(extra, sizeof(extra), "view %d: %.2f s, conf>0.8 %.1f%%", ref, map.seconds,
                              100.0 * (map.confidence > 0.8).to(torch::kFloat32).mean().item<double>());
+    if (map.per_source_passes && source_combination == umvs::SourceCombination::kAuto && used > 0 &&
+        used < static_cast<int>(sizeof(extra))) {
+      used += std::snprintf(extra + used, sizeof(extra) - used, ", sources also alone");
+    }
     if (cfg.completion.enabled() && used > 0 && used < static_cast<int>(sizeof(extra))) {
       std::snprintf(extra + used, sizeof(extra) - used, ", completed %.1f%% in %.2f s%s",
                     100.0 * map.completion.completed_share, map.completion_seconds,

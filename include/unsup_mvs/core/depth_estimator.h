@@ -28,9 +28,20 @@ struct ViewInput {
 //    the estimate of highest confidence. A source that sees another part of the scene, or sees
 //    it from too far off, then cannot spoil the variance for the other sources at the pixels
 //    where it is wrong. One pass more per source (3 instead of 1 for 2 sources).
-enum class SourceCombination { kVariance, kMostConfident };
+//  kAuto: the variance pass; when it is unsure of most of the map (fewer than
+//    kAutoMinConfidentShare of its pixels at kAutoConfidentLevel or more), also the per-source
+//    passes of kMostConfident. Far-apart keyframes, whose sources disagree, get the extra passes;
+//    well-overlapping ones keep the one pass and its depth. Measured in docs/results.md
+//    (2026-12-04, twenty-fourth session): on the living room the variance pass is confident on
+//    5-13 % of each map, on templeRing on 36-51 %, on rendered scenes on 69-98 %.
+enum class SourceCombination { kVariance, kMostConfident, kAuto };
 const char* to_string(SourceCombination c);
-SourceCombination source_combination_from_string(const std::string& s);  // "variance" | "most_confident"
+SourceCombination source_combination_from_string(const std::string& s);  // "variance" | "most_confident" | "auto"
+constexpr double kAutoConfidentLevel = 0.5;
+constexpr double kAutoMinConfidentShare = 0.2;
+// What `umvs infer` and the inference nodelet use (DepthEstimatorConfig keeps MVSNet's variance, so
+// training, the reload judge and parity see the one pass).
+constexpr SourceCombination kRecommendedSourceCombination = SourceCombination::kAuto;
 
 struct DepthEstimatorConfig {
   int max_width = 0;   // 0 = no limit; images are scaled down to fit, then cropped to multiples of 32
@@ -88,6 +99,7 @@ struct DepthMap {
   double completion_seconds = 0.0;   // DepthEstimatorConfig::completion's time (0 when off)
   DepthCompletionStats completion;   // what it did (zeros when off)
   MvsStageTimes stages;      // where the first pass's network time went (CPU fast path only)
+  bool per_source_passes = false;  // whether the passes of each source alone ran (most_confident, or auto on an unsure map)
   // Per source view, what DepthEstimatorConfig::source_rotation_search_deg did (empty when off).
   std::vector<SourceTurn> source_turns;
 };

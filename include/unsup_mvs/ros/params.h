@@ -34,6 +34,7 @@ umvs::FusionConfig fusion_config_from_ros(const ros::NodeHandle& nh);
 inline umvs::DepthEstimatorConfig inference_estimator_defaults() {
   umvs::DepthEstimatorConfig c{640, 512, 0};
   c.completion.min_confidence = umvs::kRecommendedCompletionConfidence;
+  c.source_combination = umvs::kRecommendedSourceCombination;
   return c;
 }
 
