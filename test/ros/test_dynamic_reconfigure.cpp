@@ -21,6 +21,7 @@
 #include "unsup_mvs/ResetFusion.h"
 #include "unsup_mvs/io/checkpoint.h"
 #include "unsup_mvs/io/ros/ros_conversions.h"
+#include "unsup_mvs/ros/params.h"
 
 namespace {
 
@@ -317,6 +318,20 @@ TEST(InferenceReconfigureTest, ResolutionPlanesAndPoseRefinementTakeEffectAndBad
   c = reconfigure(kInference, Request().set("max_width", 128).set("max_height", 96));
   ASSERT_TRUE(estimate(6)) << log.all();
   EXPECT_TRUE(wait_for([&] { return planes == "24"; }, 10.0)) << planes;  // 128 wide
+}
+
+// The inference node started without config/inference.yaml (as "/i/inference" above) and with it
+// (the launch files) serves the same recommended depth: auto sources, completion below 0.7.
+TEST(InferenceDefaults, CodeAndYamlRecommendTheSameInference) {
+  const auto without_yaml = umvs_ros::inference_node_config_from_ros(ros::NodeHandle("/no_parameters_here"));
+  EXPECT_EQ(without_yaml.estimator.source_combination, umvs::kRecommendedSourceCombination);
+  EXPECT_EQ(without_yaml.estimator.source_combination, umvs::SourceCombination::kAuto);
+  EXPECT_DOUBLE_EQ(without_yaml.estimator.completion.min_confidence, umvs::kRecommendedCompletionConfidence);
+  ros::NodeHandle yaml_ns("/inference_yaml");
+  ASSERT_TRUE(yaml_ns.hasParam("source_combination")) << "dynamic_reconfigure.test loads config/inference.yaml here";
+  const auto with_yaml = umvs_ros::inference_node_config_from_ros(yaml_ns);
+  EXPECT_EQ(with_yaml.estimator.source_combination, without_yaml.estimator.source_combination);
+  EXPECT_DOUBLE_EQ(with_yaml.estimator.completion.min_confidence, without_yaml.estimator.completion.min_confidence);
 }
 
 }  // namespace
