@@ -34,7 +34,9 @@ umvs::FusionConfig fusion_config_from_ros(const ros::NodeHandle& nh);
 inline umvs::DepthEstimatorConfig inference_estimator_defaults() {
   umvs::DepthEstimatorConfig c{640, 512, 0};
   c.completion.min_confidence = umvs::kRecommendedCompletionConfidence;
-  c.source_combination = umvs::kRecommendedSourceCombination;
+  // Sources stay `variance` here, unlike `umvs infer`'s `auto`: the trainer node's reload rule judges
+  // the one pass, and on far-apart keyframes with loose poses it serves a self-trained model that is
+  // worse than what `auto` served (docs/results.md, twenty-fourth session).
   return c;
 }
 
