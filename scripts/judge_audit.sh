@@ -17,8 +17,10 @@
 #                also "confident", self-training as umvs train does it by default (anchored
 #                where the start model is confident, --anchor-min-confidence 0.5), "anchored",
 #                every unconfirmed pixel anchored (the default before 2026-12-03), "unseen",
-#                "confident" plus the pixels no loss view sees (--anchor-unseen 1), and
-#                "aggressive", 10x the learning rate),
+#                "confident" plus the pixels no loss view sees (--anchor-unseen 1), "teacher",
+#                "confident" with labels, anchors and the rule's consistency from one pass per
+#                source as well (--source-combination most_confident), and "aggressive", 10x the
+#                learning rate),
 #                SCENES ("room:301 facade:302 dtu_like:303": `umvs synth` recipe:seed),
 #                SERVED (models/unsup_mvsnet.pt),
 #                TEXTURES ("none": procedural, the same scenes on every machine; "installed" renders
@@ -51,8 +53,16 @@ adapt_args() {
     anchored) echo "--self-training-every 25 --anchor-unconfirmed 1 --anchor-min-confidence 0" ;;
     confident) echo "--self-training-every 25 --anchor-unconfirmed 1 --anchor-min-confidence 0.5" ;;
     unseen) echo "--self-training-every 25 --anchor-unconfirmed 1 --anchor-min-confidence 0.5 --anchor-unseen 1" ;;
+    teacher) echo "--self-training-every 25 --anchor-unconfirmed 1 --anchor-min-confidence 0.5 $(judge_args teacher)" ;;
     aggressive) echo "--lr 1e-2" ;;
-    *) echo "unknown adaptation '$1' (photometric | self | anchored | confident | unseen | aggressive)" >&2; return 1 ;;
+    *) echo "unknown adaptation '$1' (photometric | self | anchored | confident | unseen | teacher | aggressive)" >&2; return 1 ;;
+  esac
+}
+# How the rule's consistency makes depth maps for an adaptation (as its run made its labels).
+judge_args() {
+  case "$1" in
+    teacher) echo "--source-combination most_confident" ;;
+    *) echo "" ;;
   esac
 }
 
@@ -115,8 +125,8 @@ for spec in $SCENES; do
         rm -rf "$judged"
         mkdir -p "$WORK/judge"
         # shellcheck disable=SC2086
-        "$UMVS" train $common --depth-topic /camera/depth --eval-only "$out/best.pt" --against "$SERVED" \
-          --out "$judged" >"$judged.log" 2>&1 || { echo "[audit] scoring failed, see $judged.log" >&2; exit 1; }
+        "$UMVS" train $common $(judge_args "$adapt") --depth-topic /camera/depth --eval-only "$out/best.pt" \
+          --against "$SERVED" --out "$judged" >"$judged.log" 2>&1 || { echo "[audit] scoring failed, see $judged.log" >&2; exit 1; }
       fi
       # The same two models on the second pass: ground truth only, the rule's verdict stays the one above.
       judged2="$WORK/judge2/$name"

@@ -355,18 +355,19 @@ DepthFusion::Agreement reference_agreement(DepthEstimator& estimator, const Trai
   return DepthFusion(config, estimator.device()).agreement(maps, sources)[0];
 }
 
-DepthEstimator eval_estimator(MvsNet& model, int num_depth, const torch::Device& device) {
+DepthEstimator eval_estimator(MvsNet& model, int num_depth, const torch::Device& device, SourceCombination sources) {
   DepthEstimatorConfig config;
   config.num_depth = num_depth;
+  config.source_combination = sources;
   return DepthEstimator(model, device, config);  // eval mode, no gradients
 }
 
 }  // namespace
 
 ConsistencyScore depth_consistency(MvsNet& model, const std::vector<TrainingTuple>& tuples, int num_depth,
-                                   const FusionConfig& fusion, const torch::Device& device) {
+                                   const FusionConfig& fusion, const torch::Device& device, SourceCombination sources) {
   const bool was_training = model->is_training();
-  DepthEstimator estimator = eval_estimator(model, num_depth, device);
+  DepthEstimator estimator = eval_estimator(model, num_depth, device, sources);
   ConsistencyScore score;
   int64_t confirmed = 0;
   for (const auto& t : tuples) {
@@ -390,9 +391,10 @@ FusionConfig adaptation_judge_rule() {
 }
 
 std::vector<torch::Tensor> reference_depths(MvsNet& model, const std::vector<TrainingTuple>& tuples, int num_depth,
-                                            const torch::Device& device, double min_confidence, bool keep_unseen) {
+                                            const torch::Device& device, double min_confidence, bool keep_unseen,
+                                            SourceCombination sources) {
   const bool was_training = model->is_training();
-  DepthEstimator estimator = eval_estimator(model, num_depth, device);
+  DepthEstimator estimator = eval_estimator(model, num_depth, device, sources);
   std::vector<torch::Tensor> depths;
   for (const auto& t : tuples) {
     t.validate();
@@ -432,13 +434,14 @@ torch::Tensor seen_by_loss_views(const TrainingTuple& t, const torch::Tensor& de
 std::vector<TrainingTuple> pseudo_labelled_tuples(MvsNet& model, const std::vector<TrainingTuple>& tuples,
                                                   int num_depth, const FusionConfig& fusion,
                                                   const torch::Device& device, ConsistencyScore* labelled,
-                                                  const std::vector<torch::Tensor>* unconfirmed_depth) {
+                                                  const std::vector<torch::Tensor>* unconfirmed_depth,
+                                                  SourceCombination sources) {
   if (unconfirmed_depth && unconfirmed_depth->size() != tuples.size()) {
     throw std::invalid_argument("pseudo_labelled_tuples: " + std::to_string(unconfirmed_depth->size()) +
                                 " depth maps for the unconfirmed pixels of " + std::to_string(tuples.size()) + " tuples");
   }
   const bool was_training = model->is_training();
-  DepthEstimator estimator = eval_estimator(model, num_depth, device);
+  DepthEstimator estimator = eval_estimator(model, num_depth, device, sources);
   std::vector<TrainingTuple> out;
   ConsistencyScore score;
   int64_t confirmed = 0;

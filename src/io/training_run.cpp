@@ -331,7 +331,8 @@ std::vector<TrainingTuple> TrainingRun::next_tuples() {
 void TrainingRun::label_round(MvsNet& labeller) {
   ConsistencyScore score;
   auto labelled = pseudo_labelled_tuples(labeller, to_label_, config_.trainer.num_depth, config_.label_rule,
-                                         config_.device, &score, anchor_depth_.empty() ? nullptr : &anchor_depth_);
+                                         config_.device, &score, anchor_depth_.empty() ? nullptr : &anchor_depth_,
+                                         config_.trainer.sources);
   int64_t labels = 0;
   for (const auto& t : labelled) labels += t.depth_gt.gt(0).sum().item<int64_t>();
   pseudo_->replace(std::move(labelled));
@@ -359,7 +360,7 @@ void TrainingRun::prepare_anchor() {
     anchor = load_model(path, config_.device).model;
   }
   anchor_depth_ = reference_depths(anchor, to_label_, config_.trainer.num_depth, config_.device,
-                                   config_.anchor_min_confidence, config_.anchor_unseen);
+                                   config_.anchor_min_confidence, config_.anchor_unseen, config_.trainer.sources);
   messages_ << "anchored self-training: the pixels no view confirms keep the depth of step 0";
   if (config_.anchor_min_confidence > 0.0) {
     int64_t kept = 0, all = 0;
@@ -515,7 +516,8 @@ EvalRow evaluate_checkpoint(const std::string& checkpoint, const TupleSource& so
   const auto tuples = fixed_tuples(source, max_tuples);
   const Evaluation ev = evaluate_model(loaded.model, tuples, config, device);
   // Label-free judge besides the photometric loss: the share of depth that other views confirm.
-  const ConsistencyScore consistency = depth_consistency(loaded.model, tuples, config.num_depth, adaptation_judge_rule(), device);
+  const ConsistencyScore consistency = depth_consistency(loaded.model, tuples, config.num_depth, adaptation_judge_rule(), device,
+                                                                config.sources);
   EvalRow row;
   row.checkpoint = checkpoint;
   row.tuples = ev.tuples;

@@ -328,6 +328,9 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
       .option("anchor-unseen", "0",
               "anchored self-training with a confidence floor: 1 = also anchor, whatever their confidence, the "
               "pixels that no loss view sees at the starting model's depth (the photometric loss cannot judge them)")
+      .option("source-combination", "variance",
+              "how the model's depth maps are made for self-training labels and anchors and for the judge's "
+              "multi-view consistency (--eval-only): variance | most_confident | auto, as umvs infer's option")
       .option("min-gain", "1", "exposure augmentation: lowest gain applied to a whole tuple (log-uniform draw)")
       .option("max-gain", "1", "exposure augmentation: highest gain (clipped at white)")
       .option("input-normalization", "per_image_channel",
@@ -408,6 +411,7 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
   tcfg.lr_min = args.real("lr-min");
   tcfg.beta1 = args.real("beta1");
   tcfg.micro_batch = args.integer("micro-batch");
+  tcfg.sources = umvs::source_combination_from_string(args.str("source-combination"));
   tcfg.validate();
 
   umvs::TupleConfig data_cfg;
@@ -568,6 +572,7 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
   // Recorded only when on, so that runs of versions before the option resume.
   run.options.erase("anchor-unseen");
   if (run.anchor_unseen) run.options["anchor-unseen"] = "1";
+  if (tcfg.sources == umvs::SourceCombination::kVariance) run.options.erase("source-combination");  // likewise
   run.device = device;
   run.distributed = distributed;
   run.options["world-size"] = std::to_string(distributed.world_size);  // the job's size, however it was given

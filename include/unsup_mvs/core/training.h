@@ -87,6 +87,9 @@ struct TrainerConfig {
   // Tuples per forward pass (0 = the whole batch at once): a step's gradient is accumulated over
   // micro-batches, each with its own BatchNorm statistics, as on the ranks of a distributed job.
   int micro_batch = 0;
+  // How the model's depth maps are made outside the loss: self-training labels and anchors, and
+  // the judge's multi-view consistency (`umvs infer --source-combination`).
+  SourceCombination sources = SourceCombination::kVariance;
   void validate() const;
 };
 
@@ -164,7 +167,8 @@ struct ConsistencyScore {
   int tuples = 0;
 };
 ConsistencyScore depth_consistency(MvsNet& model, const std::vector<TrainingTuple>& tuples, int num_depth,
-                                   const FusionConfig& fusion, const torch::Device& device);
+                                   const FusionConfig& fusion, const torch::Device& device,
+                                   SourceCombination sources = SourceCombination::kVariance);
 
 // The rule that judges an adapted model without labels (eval.csv's `consistent`, hence the trainer
 // node's reload decision): a reference pixel counts when at least one other view confirms it within
@@ -183,7 +187,8 @@ FusionConfig adaptation_judge_rule();
 std::vector<TrainingTuple> pseudo_labelled_tuples(MvsNet& model, const std::vector<TrainingTuple>& tuples,
                                                   int num_depth, const FusionConfig& fusion,
                                                   const torch::Device& device, ConsistencyScore* labelled = nullptr,
-                                                  const std::vector<torch::Tensor>* unconfirmed_depth = nullptr);
+                                                  const std::vector<torch::Tensor>* unconfirmed_depth = nullptr,
+                                                  SourceCombination sources = SourceCombination::kVariance);
 
 // Each tuple's reference depth map as `model` infers it for depth_consistency (eval mode, no gradients).
 // Pixels whose confidence is below `min_confidence` get 0 (as a label: none); 0 keeps every pixel.
@@ -191,7 +196,8 @@ std::vector<TrainingTuple> pseudo_labelled_tuples(MvsNet& model, const std::vect
 // confidence: the photometric loss cannot judge such a pixel, so freeing it only lets it drift.
 std::vector<torch::Tensor> reference_depths(MvsNet& model, const std::vector<TrainingTuple>& tuples, int num_depth,
                                             const torch::Device& device, double min_confidence = 0.0,
-                                            bool keep_unseen = false);
+                                            bool keep_unseen = false,
+                                            SourceCombination sources = SourceCombination::kVariance);
 
 // The reference pixels that at least one of `t`'s loss views sees with depth `depth` (the
 // reference depth map on the depth grid, [h,w]): inside that view's image and in front of it,
