@@ -12,7 +12,8 @@
 #   adaptation: "photometric" = STEPS of `umvs train` (robust loss) on the target images at
 #               320x256, D = 64 (the trainer node's size); "self" = the same with
 #               --self-training-every (labels: the model's own multi-view consistent depth; no
-#               ground truth read); "aggressive" (10x the learning rate), "loose_self" (self-training
+#               ground truth read); "self_mc" = "self" with the labels from one more pass per
+#               source (--source-combination most_confident, the trainer node's train_args); "aggressive" (10x the learning rate), "loose_self" (self-training
 #               on loose labels) and "long" (4x the steps): mistakes the reload rule must turn down.
 # Each cell: mean abs err (m) / abs rel / within 1 % (%); templeRing: points / % inside the box.
 #
@@ -93,6 +94,9 @@ adapt_args() {
   case "$1" in
     photometric) echo "" ;;
     self) echo "--self-training-every 25" ;;
+    # The trainer node's recipe (config/trainer.yaml): labels, anchors and judge from one more pass
+    # per source, each pixel keeping its most confident estimate.
+    self_mc) echo "--self-training-every 25 --source-combination most_confident" ;;
     # Adaptations a user could run by mistake, to check that the reload rule turns them down:
     aggressive) echo "--lr 1e-2" ;;  # ten times the learning rate
     loose_self) echo "--self-training-every 25 --label-max-relative-depth 0.3 --label-min-views 1 --label-min-confidence 0" ;;
