@@ -321,11 +321,11 @@ TEST(InferenceReconfigureTest, ResolutionPlanesAndPoseRefinementTakeEffectAndBad
 }
 
 // The inference node started without config/inference.yaml (as "/i/inference" above) and with it
-// (the launch files) serves the same depth: one variance pass (the trainer's reload rule judges
-// that; ros/params.h), completed below confidence 0.7.
+// (the launch files) serves the same depth: `umvs infer`'s (auto sources, completed below
+// confidence 0.7).
 TEST(InferenceDefaults, CodeAndYamlRecommendTheSameInference) {
   const auto without_yaml = umvs_ros::inference_node_config_from_ros(ros::NodeHandle("/no_parameters_here"));
-  EXPECT_EQ(without_yaml.estimator.source_combination, umvs::SourceCombination::kVariance);
+  EXPECT_EQ(without_yaml.estimator.source_combination, umvs::kRecommendedSourceCombination);
   EXPECT_DOUBLE_EQ(without_yaml.estimator.completion.min_confidence, umvs::kRecommendedCompletionConfidence);
   ros::NodeHandle yaml_ns("/inference_yaml");
   ASSERT_TRUE(yaml_ns.hasParam("source_combination")) << "dynamic_reconfigure.test loads config/inference.yaml here";

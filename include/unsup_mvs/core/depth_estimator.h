@@ -39,8 +39,8 @@ const char* to_string(SourceCombination c);
 SourceCombination source_combination_from_string(const std::string& s);  // "variance" | "most_confident" | "auto"
 constexpr double kAutoConfidentLevel = 0.5;
 constexpr double kAutoMinConfidentShare = 0.2;
-// What `umvs infer` uses (DepthEstimatorConfig keeps MVSNet's variance, so training, the reload judge
-// and parity see the one pass; so does the inference nodelet, ros/params.h says why).
+// What `umvs infer` and the inference nodelet use (DepthEstimatorConfig keeps MVSNet's variance, so
+// that training, the reload judge and parity see the one pass unless told otherwise).
 constexpr SourceCombination kRecommendedSourceCombination = SourceCombination::kAuto;
 
 struct DepthEstimatorConfig {

@@ -29,14 +29,15 @@ umvs::KeyframeConfig keyframe_config_from_ros(const ros::NodeHandle& nh);
 umvs::KeyframeStreamConfig keyframe_stream_config_from_ros(const ros::NodeHandle& nh);
 umvs::FusionConfig fusion_config_from_ros(const ros::NodeHandle& nh);
 
-// The inference nodelet's estimator: at most 640x512, planes following the input, the unsure
-// pixels completed from the confident ones (as `umvs infer`).
+// The inference nodelet's estimator: at most 640x512, planes following the input, one pass per
+// source where the one pass is unsure, the unsure pixels completed from the confident ones (as
+// `umvs infer`).
 inline umvs::DepthEstimatorConfig inference_estimator_defaults() {
   umvs::DepthEstimatorConfig c{640, 512, 0};
   c.completion.min_confidence = umvs::kRecommendedCompletionConfidence;
-  // Sources stay `variance` here, unlike `umvs infer`'s `auto`: the trainer node's reload rule judges
-  // the one pass, and on far-apart keyframes with loose poses it serves a self-trained model that is
-  // worse than what `auto` served (docs/results.md, twenty-fourth session).
+  // `auto`, as `umvs infer`. Since the trainer's train_args label and judge with one pass per source
+  // too, the models its rule reloads beat what `auto` served (docs/results.md, twenty-sixth session).
+  c.source_combination = umvs::kRecommendedSourceCombination;
   return c;
 }
 
