@@ -13,8 +13,9 @@
 #               320x256, D = 64 (the trainer node's size); "self" = the same with
 #               --self-training-every (labels: the model's own multi-view consistent depth; no
 #               ground truth read); "self_mc" = "self" with the labels from one more pass per
-#               source (--source-combination most_confident, the trainer node's train_args); "aggressive" (10x the learning rate), "loose_self" (self-training
-#               on loose labels) and "long" (4x the steps): mistakes the reload rule must turn down.
+#               source (--source-combination most_confident, the trainer node's train_args);
+#               "aggressive" (10x the learning rate), "loose_self" (self-training on loose labels)
+#               and "long" (4x the steps): mistakes the reload rule must turn down.
 # Each cell: mean abs err (m) / abs rel / within 1 % (%); templeRing: points / % inside the box.
 #
 # Usage: scripts/results.sh [WORK_DIR]
