@@ -14,6 +14,8 @@
 #               --self-training-every (labels: the model's own multi-view consistent depth; no
 #               ground truth read); "self_mc" = "self" with the labels from one more pass per
 #               source (--source-combination most_confident, the trainer node's train_args);
+#               "photometric_entropy" = "photometric" with the planes' entropy (--entropy-weight);
+#               "photometric_planes" = "photometric" with the planes' expected loss (--plane-loss-weight);
 #               "aggressive" (10x the learning rate), "loose_self" (self-training on loose labels)
 #               and "long" (4x the steps): mistakes the reload rule must turn down.
 # Each cell: mean abs err (m) / abs rel / within 1 % (%); templeRing: points / % inside the box.
@@ -94,6 +96,12 @@ tune_args() {
 adapt_args() {
   case "$1" in
     photometric) echo "" ;;
+    # The robust loss plus the depth planes' entropy (weight chosen on a fresh rendered table-top
+    # scene, docs/results.md): keeps the volume as peaked as the fine-tuned depth moves.
+    photometric_entropy) echo "--entropy-weight 0.03" ;;
+    # The robust loss plus the photometric loss of every depth plane weighed by its probability
+    # (weight chosen the same way): the volume learns where the views agree.
+    photometric_planes) echo "--plane-loss-weight 0.3" ;;
     self) echo "--self-training-every 25" ;;
     # The trainer node's recipe (config/trainer.yaml): labels, anchors and judge from one more pass
     # per source, each pixel keeping its most confident estimate.

@@ -235,6 +235,58 @@ TEST(Losses, FlatWindowsMatchPerfectlyAndLocalStdFindsThem) {
   EXPECT_NEAR(spread.slice(3, 7, 12).mean().item<double>(), 0.27, 0.05);
 }
 
+TEST(Losses, PlaneEntropyIsZeroOnOnePlaneOneWhenSpreadAndFallsAlongItsGradient) {
+  const int64_t D = 16;
+  auto one_plane = torch::zeros({1, D, 2, 3});
+  one_plane.select(1, 5).fill_(1.0);
+  EXPECT_NEAR(normalized_plane_entropy(one_plane).abs().max().item<double>(), 0.0, 1e-6);
+  EXPECT_NEAR(normalized_plane_entropy(torch::full({1, D, 2, 3}, 1.0 / D)).min().item<double>(), 1.0, 1e-5);
+  // Two planes of equal mass: log 2 / log D.
+  auto two_planes = torch::zeros({1, D, 1, 1});
+  two_planes.index_put_({0, torch::tensor({3, 9}), 0, 0}, 0.5);
+  EXPECT_NEAR(normalized_plane_entropy(two_planes).item<double>(), std::log(2.0) / std::log(16.0), 1e-6);
+  // A step down its gradient (on the network's scores before the softmax) sharpens the peak it has.
+  torch::manual_seed(3);
+  auto scores = (torch::randn({1, D, 4, 4}) * 0.5).requires_grad_(true);
+  const auto prob = torch::softmax(scores, 1);
+  const auto entropy = normalized_plane_entropy(prob);
+  entropy.sum().backward();
+  const auto stepped = torch::softmax(scores.detach() - 20.0 * scores.grad(), 1);
+  EXPECT_LT(normalized_plane_entropy(stepped).mean().item<double>(), entropy.mean().item<double>() - 0.02);
+  EXPECT_TRUE(torch::equal(stepped.argmax(1), prob.detach().argmax(1))) << "sharpening keeps each pixel's most likely plane";
+  EXPECT_THROW(normalized_plane_entropy(torch::ones({4, 4})), c10::Error);
+}
+
+TEST(Losses, PlaneLossesAreLowestOnTheTruePlaneAndTeachTheVolumeWhereItIs) {
+  // The background plane at z = 3 seen by four neighbours; 17 planes from 2 to 4 m, 3 m the 9th.
+  const auto in = make_inputs(PlaneScene{}, kFourNeighbours);
+  const auto depth_values = torch::linspace(2.0, 4.0, 17).unsqueeze(0);
+  LossConfig cfg;
+  const PlaneLosses planes = plane_photometric_losses(in.ref, in.src, in.K_ref, in.K_src, in.T, depth_values, cfg);
+  ASSERT_EQ(planes.loss.sizes(), (std::vector<int64_t>{1, 17, kH, kW}));
+  EXPECT_FALSE(planes.loss.requires_grad());
+  // Where every plane is judged, the true plane wins at nearly every pixel, and matches the
+  // robust loss of the true depth map there.
+  const auto judged = std::get<0>(planes.valid.min(1)) > 0.5;
+  ASSERT_GT(judged.sum().item<int64_t>(), kW * kH / 3);
+  const auto best = std::get<1>(planes.loss.min(1));
+  EXPECT_GT((best == 8).masked_select(judged).to(torch::kFloat).mean().item<double>(), 0.95);
+  EXPECT_LT(planes.loss.select(1, 8).masked_select(judged).mean().item<double>(), 0.006);
+  // The expected loss: all mass on the true plane < spread evenly < all on a wrong plane.
+  auto one_hot = [&](int64_t d) { return torch::one_hot(torch::full({1, kH, kW}, d, torch::kLong), 17).permute({0, 3, 1, 2}).to(torch::kFloat); };
+  const double on_true = expected_plane_loss(one_hot(8), planes).item<double>();
+  const double spread = expected_plane_loss(torch::full({1, 17, kH, kW}, 1.0 / 17), planes).item<double>();
+  const double on_wrong = expected_plane_loss(one_hot(3), planes).item<double>();
+  EXPECT_LT(on_true, 0.5 * spread);
+  EXPECT_LT(spread, on_wrong);
+  // A step down its gradient moves probability to the true plane.
+  auto scores = torch::zeros({1, 17, kH, kW}).requires_grad_(true);
+  expected_plane_loss(torch::softmax(scores, 1), planes).backward();
+  const auto stepped = torch::softmax(scores.detach() - 5.0 * scores.grad() / scores.grad().abs().max(), 1);
+  EXPECT_GT(stepped.select(1, 8).masked_select(judged).mean().item<double>(), 2.0 / 17);
+  EXPECT_THROW(expected_plane_loss(torch::ones({1, 16, kH, kW}), planes), c10::Error);
+}
+
 TEST(Losses, PresetsAndValidation) {
   const auto p = LossConfig::paper();
   EXPECT_DOUBLE_EQ(p.alpha, 0.8);

@@ -2,9 +2,11 @@
 
 #include <torch/torch.h>
 
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
+#include <vector>
 
 #include "unsup_mvs/core/geometry.h"
 
@@ -151,6 +153,14 @@ torch::Tensor supervised_depth_loss(const torch::Tensor& depth, const torch::Ten
   return torch::nn::functional::smooth_l1_loss(est_index, gt_index);
 }
 
+torch::Tensor normalized_plane_entropy(const torch::Tensor& prob) {
+  TORCH_CHECK(prob.dim() == 4 && prob.size(1) >= 2, "probability volume must be [B,D,H,W] with D >= 2, got ",
+              prob.sizes());
+  // p log p -> 0 as p -> 0; the clamp keeps log finite (and its gradient) at exact zeros.
+  const auto plogp = prob * torch::log(prob.clamp_min(1e-12));
+  return -plogp.sum(1) / std::log(static_cast<double>(prob.size(1)));
+}
+
 torch::Tensor smoothness_loss(const torch::Tensor& depth, const torch::Tensor& image) {
   auto d = depth.unsqueeze(1);
   d = d / d.mean({2, 3}, /*keepdim=*/true).clamp_min(1e-6);
@@ -160,6 +170,53 @@ torch::Tensor smoothness_loss(const torch::Tensor& depth, const torch::Tensor& i
   auto sx = (grad_x(d).abs() * wx).narrow(3, 0, W - 1).mean();
   auto sy = (grad_y(d).abs() * wy).narrow(2, 0, H - 1).mean();
   return sx + sy;
+}
+
+PlaneLosses plane_photometric_losses(const torch::Tensor& ref_image, const torch::Tensor& src_images,
+                                     const torch::Tensor& K_ref, const torch::Tensor& K_src,
+                                     const torch::Tensor& T_src_ref, const torch::Tensor& depth_values,
+                                     const LossConfig& config) {
+  config.validate();
+  TORCH_CHECK(ref_image.dim() == 4 && src_images.dim() == 5 && depth_values.dim() == 2,
+              "plane_photometric_losses: ref [B,3,H,W], sources [B,M,3,H,W], depth_values [B,D]");
+  torch::NoGradGuard no_grad;
+  const int64_t B = ref_image.size(0), H = ref_image.size(2), W = ref_image.size(3);
+  const int64_t M = src_images.size(1), D = depth_values.size(1);
+  const int64_t k = config.top_k == 0 ? M : std::min<int64_t>(config.top_k, M);
+  const auto ref = config.normalize_images ? normalize_per_image(ref_image) : ref_image;
+  std::vector<torch::Tensor> sources;
+  for (int64_t m = 0; m < M; ++m) {
+    const auto src = src_images.select(1, m);
+    sources.push_back(config.normalize_images ? normalize_per_image(src) : src);
+  }
+  std::vector<torch::Tensor> plane_loss, plane_valid;
+  for (int64_t d = 0; d < D; ++d) {
+    const auto depth = depth_values.select(1, d).view({B, 1, 1}).expand({B, H, W}).contiguous();
+    std::vector<torch::Tensor> losses, valids;
+    for (int64_t m = 0; m < M; ++m) {
+      const auto w = inverse_warp(sources[m], K_ref, K_src.select(1, m), T_src_ref.select(1, m), depth);
+      const auto map = photometric_loss_map(ref, w.warped, w.valid, config);
+      losses.push_back(map.loss);
+      valids.push_back(map.valid);
+    }
+    const auto loss = torch::stack(losses, 1), valid = torch::stack(valids, 1);
+    const auto masked = torch::where(valid > 0.5, loss, torch::full_like(loss, config.invalid_value));
+    auto [values, indices] = masked.topk(k, /*dim=*/1, /*largest=*/false);
+    const auto kept = valid.gather(1, indices);
+    const auto count = kept.sum(1);
+    plane_loss.push_back((values * kept).sum(1) / count.clamp_min(1.0));
+    plane_valid.push_back((count > 0).to(loss.scalar_type()));
+  }
+  return {torch::stack(plane_loss, 1), torch::stack(plane_valid, 1)};
+}
+
+torch::Tensor expected_plane_loss(const torch::Tensor& prob, const PlaneLosses& planes) {
+  TORCH_CHECK(prob.sizes() == planes.loss.sizes() && prob.sizes() == planes.valid.sizes(),
+              "expected_plane_loss: probabilities ", prob.sizes(), " and plane losses ", planes.loss.sizes(), " differ");
+  // Only pixels every plane can judge: a plane whose warp leaves the images is not a worse depth.
+  const auto pixel_valid = std::get<0>(planes.valid.min(1));
+  const auto expected = (prob * planes.loss * planes.valid).sum(1);
+  return (expected * pixel_valid).sum() / pixel_valid.sum().clamp_min(1.0);
 }
 
 LossTerms unsupervised_loss(const torch::Tensor& ref_image, const torch::Tensor& src_images, const torch::Tensor& K_ref,

@@ -149,6 +149,12 @@ void TrainerConfig::validate() const {
   if (!(supervised_weight >= 0) || !std::isfinite(supervised_weight)) {
     throw std::invalid_argument("supervised weight must be finite and >= 0");
   }
+  if (!(entropy_weight >= 0) || !std::isfinite(entropy_weight)) {
+    throw std::invalid_argument("entropy weight must be finite and >= 0");
+  }
+  if (!(plane_loss_weight >= 0) || !std::isfinite(plane_loss_weight)) {
+    throw std::invalid_argument("plane loss weight must be finite and >= 0");
+  }
   if (micro_batch < 0) throw std::invalid_argument("micro batch must be >= 0 (0 = the whole batch), got " + std::to_string(micro_batch));
 }
 
@@ -164,7 +170,7 @@ void LossValues::add(const LossTerms& t) {
 LossValues LossValues::mean() const {
   if (count == 0) return *this;
   LossValues m = *this;
-  for (double* v : {&m.total, &m.photometric, &m.ssim, &m.smoothness, &m.valid_fraction, &m.supervised}) *v /= count;
+  for (double* v : {&m.total, &m.photometric, &m.ssim, &m.smoothness, &m.valid_fraction, &m.supervised, &m.entropy, &m.plane_loss}) *v /= count;
   m.count = 1;
   return m;
 }
@@ -203,6 +209,8 @@ LossValues Trainer::step(const std::vector<TrainingTuple>& tuples) {
     values.smoothness += weight * v.smoothness;
     values.valid_fraction += weight * v.valid_fraction;
     values.supervised += weight * v.supervised;
+    values.entropy += weight * v.entropy;
+    values.plane_loss += weight * v.plane_loss;
     finite = std::isfinite(v.total);
   }
   if (!finite) values.total = NAN;
@@ -229,7 +237,8 @@ LossValues Trainer::step(const std::vector<TrainingTuple>& tuples) {
 
 LossValues Trainer::forward_backward(const std::vector<TrainingTuple>& tuples, double weight) {
   const auto b = make_training_batch(tuples, config_.num_depth, model_->config().depth_sampling, device_);
-  const auto out = model_->forward(b.images, b.proj, b.depth_values);
+  const bool entropy_term = config_.entropy_weight > 0, plane_term = config_.plane_loss_weight > 0;
+  const auto out = model_->forward(b.images, b.proj, b.depth_values, /*keep_prob_volume=*/entropy_term || plane_term);
   // Which tuples learn from ground truth and which from photometric consistency.
   std::vector<int64_t> supervised_rows, photometric_rows;
   for (size_t i = 0; i < b.supervised.size(); ++i) {
@@ -246,7 +255,21 @@ LossValues Trainer::forward_backward(const std::vector<TrainingTuple>& tuples, d
     const auto terms = unsupervised_loss(rows(b.loss_ref, r), rows(b.loss_src, r), rows(b.K_ref, r), rows(b.K_src, r),
                                          rows(b.T_src_ref, r), rows(out.depth, r), config_.loss);
     values.add(terms);
-    total = total + terms.total * (r.size() / batch_size);
+    auto photometric_total = terms.total;
+    if (entropy_term) {
+      const auto entropy = normalized_plane_entropy(rows(out.prob_volume, r)).mean();
+      values.entropy = entropy.item<double>();
+      photometric_total = photometric_total + config_.entropy_weight * entropy;
+    }
+    if (plane_term) {
+      const auto planes = plane_photometric_losses(rows(b.loss_ref, r), rows(b.loss_src, r), rows(b.K_ref, r),
+                                                   rows(b.K_src, r), rows(b.T_src_ref, r), rows(b.depth_values, r),
+                                                   config_.loss);
+      const auto expected = expected_plane_loss(rows(out.prob_volume, r), planes);
+      values.plane_loss = expected.item<double>();
+      photometric_total = photometric_total + config_.plane_loss_weight * expected;
+    }
+    total = total + photometric_total * (r.size() / batch_size);
   }
   if (!supervised_rows.empty()) {
     const auto& r = supervised_rows;

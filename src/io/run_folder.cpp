@@ -137,7 +137,9 @@ const NumberFields<TrainLogRow>& train_log_fields() {
       {"val_total", &TrainLogRow::val_total},
       {"val_abs_err", &TrainLogRow::val_abs_err},
       {"val_within_1pct", &TrainLogRow::val_within_1pct},
-      {"supervised", &TrainLogRow::supervised}};
+      {"supervised", &TrainLogRow::supervised},
+      {"entropy", &TrainLogRow::entropy},
+      {"plane_loss", &TrainLogRow::plane_loss}};
   return fields;
 }
 

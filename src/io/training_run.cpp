@@ -37,6 +37,8 @@ TrainLogRow log_row(int64_t step, const LossValues& loss, double lr, double seco
   row.lr = lr;
   row.seconds = seconds;
   row.supervised = loss.supervised;
+  if (loss.entropy > 0) row.entropy = loss.entropy;  // measured only with an entropy weight
+  if (loss.plane_loss > 0) row.plane_loss = loss.plane_loss;  // and with a plane loss weight
   return row;
 }
 

@@ -309,6 +309,12 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
               "rendered folder(s) with depth_gt/, trained on their ground truth in the same run as --data/--bag")
       .option("supervised-share", "0.5", "share of tuples drawn from --supervised-data")
       .option("supervised-weight", "0.1", "weight of the supervised term against the photometric total")
+      .option("entropy-weight", "0",
+              "weight of the depth planes' normalised entropy in the photometric loss: keeps the network's "
+              "confidence while fine-tuning moves its depth (0 = the paper's loss; docs/training.md)")
+      .option("plane-loss-weight", "0",
+              "weight of the photometric loss of every depth plane weighed by the network's probability of it: "
+              "the probability volume learns where the views agree (0 = the paper's loss; docs/training.md)")
       .option("self-training-every", "0",
               "self-training: every N steps (and at the start) the training tuples are labelled by the current model "
               "where several views agree (fusion thresholds) and train on those labels at --supervised-share, the "
@@ -404,6 +410,8 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
     throw std::invalid_argument("--loss must be naive, first-order, robust or supervised, got '" + loss + "'");
   }
   tcfg.supervised_weight = args.real("supervised-weight");
+  tcfg.entropy_weight = args.real("entropy-weight");
+  tcfg.plane_loss_weight = args.real("plane-loss-weight");
   const umvs::PlaneCount planes = training_plane_count(args);
   tcfg.num_depth = planes.planes;
   tcfg.lr = args.real("lr");
@@ -595,10 +603,19 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
   if (to_do > 0) progress.emplace("train", to_do, std::max<int64_t>(1, to_do / 50));
   const auto result = training.run([&](const umvs::TrainLogRow& row, int64_t done, int64_t) {
     char extra[160];
-    std::snprintf(extra, sizeof(extra), "loss %.4f (photo %.4f ssim %.4f smooth %.4f sup %.3f)", row.total.value_or(NAN),
+    std::snprintf(extra, sizeof(extra), "loss %.4f (photo %.4f ssim %.4f smooth %.4f sup %.3f", row.total.value_or(NAN),
                   row.photometric.value_or(NAN), row.ssim.value_or(NAN), row.smoothness.value_or(NAN),
                   row.supervised.value_or(NAN));
-    progress->update(done, extra);
+    std::string line = extra;
+    auto add_term = [&](const char* name, const std::optional<double>& value) {  // terms only some runs have
+      if (!value) return;
+      std::snprintf(extra, sizeof(extra), " %s %.4f", name, *value);
+      line += extra;
+    };
+    add_term("entropy", row.entropy);
+    add_term("planes", row.plane_loss);
+    line += ")";
+    progress->update(done, line);
   });
   if (!progress) {
     std::cout << "wrote the model at step " << result.step << " to " << training.last_path() << " and "

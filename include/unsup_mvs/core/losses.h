@@ -101,6 +101,32 @@ torch::Tensor smoothness_loss(const torch::Tensor& depth, const torch::Tensor& i
 torch::Tensor supervised_depth_loss(const torch::Tensor& depth, const torch::Tensor& gt,
                                     const torch::Tensor& depth_values, DepthSampling sampling);
 
+// Entropy of each pixel's distribution over the depth planes, divided by log(D): 0 when all the
+// probability is on one plane, 1 when it is spread evenly. The robust loss sees only the expected
+// depth, so nothing in it keeps the volume peaked; a small weight on this mean does (a label-free
+// regulariser for fine-tuning: docs/training.md).  prob [B,D,H,W] (softmax over D)  -> [B,H,W]
+torch::Tensor normalized_plane_entropy(const torch::Tensor& prob);
+
+// The robust photometric loss of every reference pixel as if its depth were each plane's: per
+// plane d, the first-order term of each loss view warped at depth_values[:, d], and per pixel the
+// mean of its top-K valid views (config.top_k; 0 = all). No gradients: the planes are fixed.
+//   ref_image [B,3,H,W]; src_images [B,M,3,H,W]; cameras as unsupervised_loss; depth_values [B,D]
+//   -> loss [B,D,H,W], valid [B,D,H,W] (float 0/1: at least one valid view kept)
+struct PlaneLosses {
+  torch::Tensor loss;
+  torch::Tensor valid;
+};
+PlaneLosses plane_photometric_losses(const torch::Tensor& ref_image, const torch::Tensor& src_images,
+                                     const torch::Tensor& K_ref, const torch::Tensor& K_src,
+                                     const torch::Tensor& T_src_ref, const torch::Tensor& depth_values,
+                                     const LossConfig& config);
+
+// The photometric loss the network's distribution expects: sum_d prob[d] * loss[d], averaged over
+// the pixels that are valid on every plane (0 when there is none). Lower when the probability sits
+// on the planes where the views agree; where every plane looks alike it does not care how the
+// probability is spread (unlike normalized_plane_entropy).  prob [B,D,H,W]  -> scalar
+torch::Tensor expected_plane_loss(const torch::Tensor& prob, const PlaneLosses& planes);
+
 struct LossTerms {
   torch::Tensor total;        // scalar, differentiable
   torch::Tensor photometric;  // scalar (after top-K)

@@ -84,6 +84,15 @@ struct TrainerConfig {
   // Weight of supervised_depth_loss (tuples marked supervised: rendered scenes) against the
   // photometric total (the other tuples: real images, bags) when both train in one optimisation.
   double supervised_weight = 1.0;
+  // Weight of the probability volume's mean normalized_plane_entropy (losses.h) in the loss of the
+  // photometric tuples: keeps the network confident where it was while the photometric loss moves
+  // its expected depth (fine-tuning with that loss alone flattens the volume, docs/results.md).
+  // 0 = the paper's loss.
+  double entropy_weight = 0.0;
+  // Weight of expected_plane_loss (losses.h) in the loss of the photometric tuples: the robust
+  // photometric loss of every depth plane, weighed by the network's probability of it, so that the
+  // volume itself learns where the views agree. 0 = the paper's loss.
+  double plane_loss_weight = 0.0;
   // Tuples per forward pass (0 = the whole batch at once): a step's gradient is accumulated over
   // micro-batches, each with its own BatchNorm statistics, as on the ranks of a distributed job.
   int micro_batch = 0;
@@ -100,6 +109,8 @@ double learning_rate_at(const TrainerConfig& config, int64_t step, int64_t total
 struct LossValues {
   double total = 0, photometric = 0, ssim = 0, smoothness = 0, valid_fraction = 0;
   double supervised = 0;  // supervised_depth_loss of the tuples trained on ground truth
+  double entropy = 0;     // normalized_plane_entropy of the photometric tuples (when entropy_weight > 0)
+  double plane_loss = 0;  // expected_plane_loss of the photometric tuples (when plane_loss_weight > 0)
   int count = 0;
   bool updated = true;    // a step: false when no update was applied (a non-finite loss here or, distributed, on another rank)
   void add(const LossTerms& t);

@@ -81,6 +81,8 @@ struct TrainLogRow {
   std::optional<double> total, photometric, ssim, smoothness, valid_fraction, lr, seconds;
   std::optional<double> val_photometric, val_total, val_abs_err, val_within_1pct;  // at validation steps
   std::optional<double> supervised;
+  std::optional<double> entropy;  // of the photometric tuples' volumes, when train's --entropy-weight > 0
+  std::optional<double> plane_loss;  // their expected plane loss, when train's --plane-loss-weight > 0
 };
 std::string format_csv_row(const TrainLogRow& row);
 // Throws std::runtime_error when the row has no step.
