@@ -310,11 +310,12 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
       .option("supervised-share", "0.5", "share of tuples drawn from --supervised-data")
       .option("supervised-weight", "0.1", "weight of the supervised term against the photometric total")
       .option("entropy-weight", "0",
-              "weight of the depth planes' normalised entropy in the photometric loss: keeps the network's "
-              "confidence while fine-tuning moves its depth (0 = the paper's loss; docs/training.md)")
+              "weight of the depth planes' normalised entropy in the photometric loss: makes every pixel confident, "
+              "right or not (tested and turned down, docs/training.md; 0 = the paper's loss)")
       .option("plane-loss-weight", "0",
               "weight of the photometric loss of every depth plane weighed by the network's probability of it: "
-              "the probability volume learns where the views agree (0 = the paper's loss; docs/training.md)")
+              "the probability volume learns where the views agree (better on the living room, worse on rendered "
+              "scenes: docs/training.md; 0 = the paper's loss)")
       .option("self-training-every", "0",
               "self-training: every N steps (and at the start) the training tuples are labelled by the current model "
               "where several views agree (fusion thresholds) and train on those labels at --supervised-share, the "
@@ -581,6 +582,8 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
   run.options.erase("anchor-unseen");
   if (run.anchor_unseen) run.options["anchor-unseen"] = "1";
   if (tcfg.sources == umvs::SourceCombination::kVariance) run.options.erase("source-combination");  // likewise
+  if (tcfg.entropy_weight == 0) run.options.erase("entropy-weight");                                 // likewise
+  if (tcfg.plane_loss_weight == 0) run.options.erase("plane-loss-weight");                           // likewise
   run.device = device;
   run.distributed = distributed;
   run.options["world-size"] = std::to_string(distributed.world_size);  // the job's size, however it was given

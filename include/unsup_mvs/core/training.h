@@ -85,9 +85,8 @@ struct TrainerConfig {
   // photometric total (the other tuples: real images, bags) when both train in one optimisation.
   double supervised_weight = 1.0;
   // Weight of the probability volume's mean normalized_plane_entropy (losses.h) in the loss of the
-  // photometric tuples: keeps the network confident where it was while the photometric loss moves
-  // its expected depth (fine-tuning with that loss alone flattens the volume, docs/results.md).
-  // 0 = the paper's loss.
+  // photometric tuples: fine-tuning with that loss alone flattens the volume; this term makes every
+  // pixel confident, right or not (turned down as a default, docs/training.md). 0 = the paper's loss.
   double entropy_weight = 0.0;
   // Weight of expected_plane_loss (losses.h) in the loss of the photometric tuples: the robust
   // photometric loss of every depth plane, weighed by the network's probability of it, so that the
