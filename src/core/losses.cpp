@@ -2,7 +2,6 @@
 
 #include <torch/torch.h>
 
-#include <algorithm>
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
@@ -101,9 +100,18 @@ LossMap photometric_loss_map(const torch::Tensor& ref, const torch::Tensor& warp
   return {loss, v * right * below};
 }
 
-torch::Tensor top_k_aggregate(const torch::Tensor& losses, const torch::Tensor& valid, int top_k,
-                              double invalid_value) {
-  TORCH_CHECK(losses.sizes() == valid.sizes() && losses.dim() == 4, "top_k_aggregate: losses and valid must be [B,M,H,W]");
+namespace {
+
+// Eq. 5's selection: per pixel the top_k (0 = all) smallest entries over the views (dim 1), invalid
+// entries counting as invalid_value, and which of those kept are valid; values are 0 where invalid.
+//   losses, valid [B,M,H,W]  -> both [B,k,H,W]
+struct KeptEntries {
+  torch::Tensor values;
+  torch::Tensor valid;
+};
+KeptEntries smallest_valid_entries(const torch::Tensor& losses, const torch::Tensor& valid, int top_k,
+                                   double invalid_value) {
+  TORCH_CHECK(losses.sizes() == valid.sizes() && losses.dim() == 4, "top-K selection: losses and valid must be [B,M,H,W]");
   const int64_t M = losses.size(1);
   if (top_k < 0 || top_k > M) {
     throw std::invalid_argument("top_k must be in 0.." + std::to_string(M) + " (0 = all views), got " + std::to_string(top_k));
@@ -112,7 +120,15 @@ torch::Tensor top_k_aggregate(const torch::Tensor& losses, const torch::Tensor& 
   auto masked = torch::where(valid > 0.5, losses, torch::full_like(losses, invalid_value));
   auto [values, indices] = masked.topk(k, /*dim=*/1, /*largest=*/false, /*sorted=*/true);
   auto kept_valid = valid.gather(1, indices);
-  return (values * kept_valid).sum() / kept_valid.sum().clamp_min(1.0);
+  return {values * kept_valid, kept_valid};
+}
+
+}  // namespace
+
+torch::Tensor top_k_aggregate(const torch::Tensor& losses, const torch::Tensor& valid, int top_k,
+                              double invalid_value) {
+  const KeptEntries kept = smallest_valid_entries(losses, valid, top_k, invalid_value);
+  return kept.values.sum() / kept.valid.sum().clamp_min(1.0);
 }
 
 SsimLossMap ssim_loss_map(const torch::Tensor& ref, const torch::Tensor& warped, const torch::Tensor& valid) {
@@ -182,7 +198,6 @@ PlaneLosses plane_photometric_losses(const torch::Tensor& ref_image, const torch
   torch::NoGradGuard no_grad;
   const int64_t B = ref_image.size(0), H = ref_image.size(2), W = ref_image.size(3);
   const int64_t M = src_images.size(1), D = depth_values.size(1);
-  const int64_t k = config.top_k == 0 ? M : std::min<int64_t>(config.top_k, M);
   const auto ref = config.normalize_images ? normalize_per_image(ref_image) : ref_image;
   std::vector<torch::Tensor> sources;
   for (int64_t m = 0; m < M; ++m) {
@@ -199,13 +214,11 @@ PlaneLosses plane_photometric_losses(const torch::Tensor& ref_image, const torch
       losses.push_back(map.loss);
       valids.push_back(map.valid);
     }
-    const auto loss = torch::stack(losses, 1), valid = torch::stack(valids, 1);
-    const auto masked = torch::where(valid > 0.5, loss, torch::full_like(loss, config.invalid_value));
-    auto [values, indices] = masked.topk(k, /*dim=*/1, /*largest=*/false);
-    const auto kept = valid.gather(1, indices);
-    const auto count = kept.sum(1);
-    plane_loss.push_back((values * kept).sum(1) / count.clamp_min(1.0));
-    plane_valid.push_back((count > 0).to(loss.scalar_type()));
+    const KeptEntries kept =
+        smallest_valid_entries(torch::stack(losses, 1), torch::stack(valids, 1), config.top_k, config.invalid_value);
+    const auto count = kept.valid.sum(1);
+    plane_loss.push_back(kept.values.sum(1) / count.clamp_min(1.0));
+    plane_valid.push_back((count > 0).to(kept.values.scalar_type()));
   }
   return {torch::stack(plane_loss, 1), torch::stack(plane_valid, 1)};
 }
@@ -246,19 +259,14 @@ LossTerms unsupervised_loss(const torch::Tensor& ref_image, const torch::Tensor&
       ++ssim_count;
     }
   }
-  auto loss_stack = torch::stack(losses, 1), valid_stack = torch::stack(valids, 1);
+  const KeptEntries kept =
+      smallest_valid_entries(torch::stack(losses, 1), torch::stack(valids, 1), config.top_k, config.invalid_value);
   LossTerms t;
-  t.photometric = top_k_aggregate(loss_stack, valid_stack, config.top_k, config.invalid_value);
+  t.photometric = kept.values.sum() / kept.valid.sum().clamp_min(1.0);  // as top_k_aggregate
   t.ssim = ssim_count > 0 ? ssim_sum / ssim_count : ssim_sum;
   t.smoothness = smoothness_loss(depth, ref);
   t.total = config.alpha * t.photometric + config.beta * t.ssim + config.gamma * t.smoothness;
-  {
-    torch::NoGradGuard no_grad;
-    const int64_t k = config.top_k == 0 ? M : config.top_k;
-    auto masked = torch::where(valid_stack > 0.5, loss_stack, torch::full_like(loss_stack, config.invalid_value));
-    auto idx = std::get<1>(masked.topk(k, 1, false));
-    t.valid_fraction = valid_stack.gather(1, idx).mean();
-  }
+  t.valid_fraction = kept.valid.detach().mean();
   return t;
 }
 

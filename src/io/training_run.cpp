@@ -457,7 +457,7 @@ TrainingRun::Result TrainingRun::run(
         max_seconds > 0 && std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count() >= max_seconds;
     if (group_) {  // the job's mean loss, and one decision to stop (rank clocks differ)
       const auto s = group_->sum({loss.total, loss.photometric, loss.ssim, loss.smoothness, loss.valid_fraction,
-                                  loss.supervised, out_of_time ? 1.0 : 0.0});
+                                  loss.supervised, out_of_time ? 1.0 : 0.0, loss.entropy, loss.plane_loss});
       const double ranks = group_->size();
       loss.total = loss.updated ? s[0] / ranks : NAN;
       loss.photometric = s[1] / ranks;
@@ -466,6 +466,8 @@ TrainingRun::Result TrainingRun::run(
       loss.valid_fraction = s[4] / ranks;
       loss.supervised = s[5] / ranks;
       out_of_time = s[6] > 0;
+      loss.entropy = s[7] / ranks;
+      loss.plane_loss = s[8] / ranks;
     }
     result.out_of_time = out_of_time;
     TrainLogRow row = log_row(step_, loss, lr,
