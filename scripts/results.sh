@@ -16,6 +16,7 @@
 #               source (--source-combination most_confident, the trainer node's train_args);
 #               "photometric_entropy" = "photometric" with the planes' entropy (--entropy-weight);
 #               "photometric_planes" = "photometric" with the planes' expected loss (--plane-loss-weight);
+#               "photometric_frozen_bn" = "photometric" with BatchNorm's statistics frozen (--batchnorm frozen);
 #               "aggressive" (10x the learning rate), "loose_self" (self-training on loose labels)
 #               and "long" (4x the steps): mistakes the reload rule must turn down.
 # Each cell: mean abs err (m) / abs rel / within 1 % (%); templeRing: points / % inside the box.
@@ -102,6 +103,9 @@ adapt_args() {
     # The robust loss plus the photometric loss of every depth plane weighed by its probability
     # (weight chosen the same way): the volume learns where the views agree.
     photometric_planes) echo "--plane-loss-weight 0.3" ;;
+    # The robust loss with BatchNorm normalising by the model's own running statistics, left as they
+    # were: batch-1 steps on a few target images otherwise replace them with the target's.
+    photometric_frozen_bn) echo "--batchnorm frozen" ;;
     self) echo "--self-training-every 25" ;;
     # The trainer node's recipe (config/trainer.yaml): labels, anchors and judge from one more pass
     # per source, each pixel keeping its most confident estimate.

@@ -412,7 +412,7 @@ TEST(TrainArguments, ZoomRangeIsCheckedFirstAndRecordedOnlyWhenNotTheDefault) {
 
 // The probability-volume terms change what a run computes: recorded when on (a resume must keep
 // them), not recorded when off, so that runs of versions before the options resume.
-TEST(TrainArguments, VolumeTermsAreCheckedFirstAndRecordedOnlyWhenOn) {
+TEST(TrainArguments, VolumeTermsAndFrozenBatchNormAreCheckedFirstAndRecordedOnlyWhenOn) {
   const std::string data = scene("train_volume_terms_data");  // 96x64
   const std::string dir = test::temp_dir("train_volume_terms");
   const std::string flags = " --width 64 --height 32 --num-depth 8 --views-loss 3 --top-k 2 --threads 1 --save-every 2";
@@ -420,20 +420,27 @@ TEST(TrainArguments, VolumeTermsAreCheckedFirstAndRecordedOnlyWhenOn) {
   EXPECT_EQ(negative.status, 2) << negative.output;
   EXPECT_TRUE(contains(negative.output, "plane loss weight must be finite and >= 0")) << negative.output;
   EXPECT_FALSE(fs::exists(dir + "/negative"));
-  ASSERT_EQ(run_umvs("train --data " + data + flags + " --plane-loss-weight 0.3 --entropy-weight 0.01 --steps 2 --out " +
-                     dir + "/terms").status, 0);
+  Result batchnorm = run_umvs("train --data " + data + flags + " --batchnorm fixed --steps 2 --out " + dir + "/batchnorm");
+  EXPECT_EQ(batchnorm.status, 2) << batchnorm.output;
+  EXPECT_TRUE(contains(batchnorm.output, "--batchnorm must be train or frozen, got 'fixed'")) << batchnorm.output;
+  EXPECT_FALSE(fs::exists(dir + "/batchnorm"));
+  ASSERT_EQ(run_umvs("train --data " + data + flags + " --plane-loss-weight 0.3 --entropy-weight 0.01 --batchnorm frozen " +
+                     "--steps 2 --out " + dir + "/terms").status, 0);
   const RunConfig stored = read_run_config(dir + "/terms/run_config.txt");
   EXPECT_EQ(stored.at("plane-loss-weight"), "0.3");
   EXPECT_EQ(stored.at("entropy-weight"), "0.01");
+  EXPECT_EQ(stored.at("batchnorm"), "frozen");
   const auto log = read_csv_rows(dir + "/terms/train_log.csv");
   ASSERT_FALSE(log.empty());
   EXPECT_GT(log.back().number("plane_loss").value_or(0), 0) << "the log has the term it weighs";
-  Result dropped = run_umvs("train --data " + data + flags + " --entropy-weight 0.01 --steps 4 --resume --out " + dir + "/terms");
+  Result dropped = run_umvs("train --data " + data + flags + " --entropy-weight 0.01 --batchnorm frozen --steps 4 --resume --out " +
+                            dir + "/terms");
   EXPECT_EQ(dropped.status, 2) << dropped.output;
   EXPECT_TRUE(contains(dropped.output, "--plane-loss-weight: the run in this folder has '0.3', now (not set)")) << dropped.output;
   ASSERT_EQ(run_umvs("train --data " + data + flags + " --steps 2 --out " + dir + "/default").status, 0);
   EXPECT_EQ(read_run_config(dir + "/default/run_config.txt").count("plane-loss-weight"), 0u);
   EXPECT_EQ(read_run_config(dir + "/default/run_config.txt").count("entropy-weight"), 0u);
+  EXPECT_EQ(read_run_config(dir + "/default/run_config.txt").count("batchnorm"), 0u);
   EXPECT_FALSE(read_csv_rows(dir + "/default/train_log.csv").back().number("plane_loss").has_value());
 }
 

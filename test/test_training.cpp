@@ -200,6 +200,50 @@ TEST(Training, ABrokenBatchLeavesTheModelUntouched) {
   EXPECT_FALSE(torch::equal(before[1], model->parameters()[1]));
 }
 
+TEST(Training, FrozenBatchNormNormalisesAsAtInferenceKeepsItsStatisticsAndStillLearns) {
+  // --batchnorm frozen: a step's forward pass normalises with the running statistics (so its loss
+  // is the evaluation's loss of the same tuple), leaves them unchanged, and still updates every
+  // weight, BatchNorm's scale and shift included. The default ("train") does neither of the first
+  // two. The shipped model: its statistics are a trained model's (a random network's frozen at
+  // their initial values saturate the softmax and no gradient reaches the layers).
+  const std::string dir = write_scene("frozen_bn", 96, 64, 5, 3);
+  TupleConfig dcfg;
+  dcfg.views_in = 3;
+  dcfg.views_loss = 2;
+  dcfg.width = 96;
+  dcfg.height = 64;
+  MvsFolderSource source({dir}, dcfg);
+  const auto tuple = source.tuple(0, nullptr);
+  for (const bool frozen : {false, true}) {
+    SCOPED_TRACE(frozen ? "frozen" : "train");
+    MvsNet model = load_model(std::string(UMVS_SOURCE_DIR) + "/models/unsup_mvsnet.pt", torch::kCPU).model;
+    TrainerConfig tcfg;
+    tcfg.num_depth = 16;
+    tcfg.loss.top_k = 2;
+    tcfg.freeze_batchnorm = frozen;
+    Trainer trainer(model, torch::kCPU, tcfg);
+    const double evaluated = trainer.evaluate({tuple}).loss.total;
+    std::vector<torch::Tensor> buffers_before, params_before;
+    for (const auto& t : model->buffers()) buffers_before.push_back(t.clone());
+    for (const auto& t : model->parameters()) params_before.push_back(t.clone());
+    const double stepped = trainer.step({tuple}).total;
+    ASSERT_TRUE(std::isfinite(stepped));
+    if (frozen) {
+      EXPECT_NEAR(stepped, evaluated, 1e-5 * std::abs(evaluated));
+    } else {
+      EXPECT_GT(std::abs(stepped - evaluated), 1e-3 * std::abs(evaluated));
+    }
+    int changed_buffers = 0;
+    const auto buffers = model->buffers();
+    for (size_t i = 0; i < buffers.size(); ++i) changed_buffers += !torch::equal(buffers_before[i], buffers[i]);
+    EXPECT_EQ(changed_buffers == 0, frozen) << changed_buffers << " of " << buffers.size() << " buffers changed";
+    int changed_params = 0;
+    const auto params = model->parameters();
+    for (size_t i = 0; i < params.size(); ++i) changed_params += !torch::equal(params_before[i], params[i]);
+    EXPECT_EQ(changed_params, static_cast<int>(params.size()));
+  }
+}
+
 TEST(Training, ShortRunFromRandomWeightsReducesDepthError) {
   // 160x128 input, 32 planes, a single room scene without lighting change, robust loss.
   const std::string dir = write_scene("learn", 160, 128, 8, 4);

@@ -175,19 +175,37 @@ LossValues LossValues::mean() const {
   return m;
 }
 
+namespace {
+
+// BatchNorm layers to eval mode: they normalise with their running statistics and update none.
+void freeze_batchnorm_statistics(torch::nn::Module& model) {
+  for (const auto& m : model.modules(/*include_self=*/false)) {
+    if (dynamic_cast<torch::nn::BatchNorm2dImpl*>(m.get()) || dynamic_cast<torch::nn::BatchNorm3dImpl*>(m.get())) {
+      m->eval();
+    }
+  }
+}
+
+}  // namespace
+
+void Trainer::enter_training_mode() {
+  model_->train();
+  if (config_.freeze_batchnorm) freeze_batchnorm_statistics(*model_);
+}
+
 Trainer::Trainer(MvsNet model, torch::Device device, TrainerConfig config)
     : model_(std::move(model)), device_(device), config_(std::move(config)) {
   config_.validate();
   model_->to(device_);
-  model_->train();
+  enter_training_mode();
   optimizer_ = std::make_unique<torch::optim::Adam>(
       model_->parameters(),
       torch::optim::AdamOptions(config_.lr).betas(std::make_tuple(config_.beta1, config_.beta2)));
 }
 
 LossValues Trainer::step(const std::vector<TrainingTuple>& tuples) {
-  model_->train();
-  // BatchNorm updates its running statistics in the forward pass: keep them, so that a batch that
+  enter_training_mode();
+  // BatchNorm (unless frozen) updates its running statistics in the forward pass: keep them, so that a batch that
   // turns out broken leaves no trace (NaN statistics would ruin every later evaluation).
   std::vector<torch::Tensor> buffers_before;
   for (const auto& buffer : model_->buffers()) buffers_before.push_back(buffer.clone());

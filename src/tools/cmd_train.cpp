@@ -360,6 +360,9 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
       .option("micro-batch", "0",
               "tuples per forward pass, the step's gradient accumulated over them (0 = the whole batch); "
               "BatchNorm statistics are per micro-batch")
+      .option("batchnorm", "train",
+              "train (normalise with each batch's statistics and update the running ones) | frozen (normalise "
+              "with the --init model's running statistics and keep them: small-batch fine-tuning)")
       .option("lr", "1e-3", "Adam learning rate (at the first step)")
       .option("lr-schedule", "constant",
               "constant | cosine (from --lr at the first step down to --lr-min at the last of --steps)")
@@ -420,6 +423,11 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
   tcfg.lr_min = args.real("lr-min");
   tcfg.beta1 = args.real("beta1");
   tcfg.micro_batch = args.integer("micro-batch");
+  const std::string batchnorm = args.str("batchnorm");
+  if (batchnorm != "train" && batchnorm != "frozen") {
+    throw std::invalid_argument("--batchnorm must be train or frozen, got '" + batchnorm + "'");
+  }
+  tcfg.freeze_batchnorm = batchnorm == "frozen";
   tcfg.sources = umvs::source_combination_from_string(args.str("source-combination"));
   tcfg.validate();
 
@@ -584,6 +592,7 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
   if (tcfg.sources == umvs::SourceCombination::kVariance) run.options.erase("source-combination");  // likewise
   if (tcfg.entropy_weight == 0) run.options.erase("entropy-weight");                                 // likewise
   if (tcfg.plane_loss_weight == 0) run.options.erase("plane-loss-weight");                           // likewise
+  if (!tcfg.freeze_batchnorm) run.options.erase("batchnorm");                                        // likewise
   run.device = device;
   run.distributed = distributed;
   run.options["world-size"] = std::to_string(distributed.world_size);  // the job's size, however it was given

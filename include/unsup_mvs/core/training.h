@@ -95,6 +95,10 @@ struct TrainerConfig {
   // Tuples per forward pass (0 = the whole batch at once): a step's gradient is accumulated over
   // micro-batches, each with its own BatchNorm statistics, as on the ranks of a distributed job.
   int micro_batch = 0;
+  // BatchNorm during training steps: false = normalise with each batch's statistics and update the
+  // running ones (training from scratch); true = normalise with the running statistics, as at
+  // inference, and leave them as they are (small-batch fine-tuning; scale and shift still learn).
+  bool freeze_batchnorm = false;
   // How the model's depth maps are made outside the loss: self-training labels and anchors, and
   // the judge's multi-view consistency (`umvs infer --source-combination`).
   SourceCombination sources = SourceCombination::kVariance;
@@ -126,7 +130,7 @@ class Trainer {
  public:
   Trainer(MvsNet model, torch::Device device, TrainerConfig config);
 
-  // One Adam step on a batch of tuples (the model in train mode).
+  // One Adam step on a batch of tuples (the model in train mode; see TrainerConfig::freeze_batchnorm).
   LossValues step(const std::vector<TrainingTuple>& batch);
   // Loss (and depth errors when ground truth is present) without gradients, in eval mode; the
   // model is put back in train mode afterwards.
@@ -153,6 +157,8 @@ class Trainer {
   MvsNet model_;
   torch::Device device_;
   TrainerConfig config_;
+  // Train mode, with BatchNorm's statistics frozen when config_.freeze_batchnorm.
+  void enter_training_mode();
   // Forward pass and backward of weight * the tuples' loss (gradients accumulate); the loss values.
   LossValues forward_backward(const std::vector<TrainingTuple>& tuples, double weight);
 
