@@ -205,8 +205,9 @@ Trainer::Trainer(MvsNet model, torch::Device device, TrainerConfig config)
 
 LossValues Trainer::step(const std::vector<TrainingTuple>& tuples) {
   enter_training_mode();
-  // BatchNorm (unless frozen) updates its running statistics in the forward pass: keep them, so that a batch that
-  // turns out broken leaves no trace (NaN statistics would ruin every later evaluation).
+  // BatchNorm (unless frozen) updates its running statistics in the forward pass: keep them, so
+  // that a batch that turns out broken leaves no trace (NaN statistics would ruin every later
+  // evaluation).
   std::vector<torch::Tensor> buffers_before;
   for (const auto& buffer : model_->buffers()) buffers_before.push_back(buffer.clone());
   optimizer_->zero_grad();
