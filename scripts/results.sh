@@ -18,6 +18,7 @@
 #               "photometric_planes" = "photometric" with the planes' expected loss (--plane-loss-weight);
 #               "photometric_frozen_bn" = "photometric" with BatchNorm's statistics frozen (--batchnorm frozen);
 #               "photometric_low_lr" = "photometric" at a third of the training learning rate (--lr 3e-4);
+#               "photometric_lr1e-4" = "photometric" at a tenth of it (--lr 1e-4);
 #               "aggressive" (10x the learning rate), "loose_self" (self-training on loose labels)
 #               and "long" (4x the steps): mistakes the reload rule must turn down.
 # Each cell: mean abs err (m) / abs rel / within 1 % (%); templeRing: points / % inside the box.
@@ -110,6 +111,8 @@ adapt_args() {
     # The robust loss at a fine-tuning rate (chosen on a fresh rendered table-top scene among 3e-4
     # and 1e-4, docs/results.md, twenty-eighth session) instead of the from-scratch 1e-3.
     photometric_low_lr) echo "--lr 3e-4" ;;
+    # The same at a tenth of the training rate (docs/results.md, twenty-ninth session).
+    photometric_lr1e-4) echo "--lr 1e-4" ;;
     self) echo "--self-training-every 25" ;;
     # The trainer node's recipe (config/trainer.yaml): labels, anchors and judge from one more pass
     # per source, each pixel keeping its most confident estimate.
