@@ -19,6 +19,8 @@
 #               "photometric_frozen_bn" = "photometric" with BatchNorm's statistics frozen (--batchnorm frozen);
 #               "photometric_low_lr" = "photometric" at a third of the training learning rate (--lr 3e-4);
 #               "photometric_lr1e-4" = "photometric" at a tenth of it (--lr 1e-4);
+#               "photometric_rehearsal" = "photometric" with half of the steps supervised on 8
+#               rendered training scenes (rehearsal; 2 x STEPS, so the target gets STEPS);
 #               "aggressive" (10x the learning rate), "loose_self" (self-training on loose labels)
 #               and "long" (4x the steps): mistakes the reload rule must turn down.
 # Each cell: mean abs err (m) / abs rel / within 1 % (%); templeRing: points / % inside the box.
@@ -79,6 +81,13 @@ rendered=$(IFS=,; echo "${rendered_dirs[*]}")
   "$UMVS" import rgbd --data "$SHARED/livingroom" --out "$WORK/data/livingroom" >/dev/null
 [ -f "$WORK/data/templeRing/pair.txt" ] ||
   "$UMVS" import middlebury --data "$SHARED/templeRing" --out "$WORK/data/templeRing" >/dev/null
+# Rendered training scenes for the rehearsal adaptation (rendered on first use; seeds 1000-1001).
+rehearsal_scenes() {
+  [ -f "$WORK/data/rehearsal/train.txt" ] ||
+    UMVS="$UMVS" TEXTURES=none WIDTH=320 HEIGHT=256 THREADS="$THREADS" \
+      bash "$here/render_training_scenes.sh" "$WORK/data/rehearsal" 2 0 >&2
+  cat "$WORK/data/rehearsal/train.txt"
+}
 TEMPLE_BBOX=-0.023121,-0.038009,-0.091940,0.078626,0.121636,-0.017395
 
 # Per target: evaluation set-up, and fine-tuning set-up (the size the default model's last stage
@@ -113,6 +122,10 @@ adapt_args() {
     photometric_low_lr) echo "--lr 3e-4" ;;
     # The same at a tenth of the training rate (docs/results.md, twenty-ninth session).
     photometric_lr1e-4) echo "--lr 1e-4" ;;
+    # The robust loss on the target with half of the steps supervised on rendered training scenes
+    # (scripts/render_training_scenes.sh: two of each recipe, procedural textures), so that the
+    # model keeps what it learnt there (docs/results.md, thirty-first session).
+    photometric_rehearsal) echo "--supervised-data $(rehearsal_scenes) --supervised-share 0.5 --supervised-weight 0.1" ;;
     self) echo "--self-training-every 25" ;;
     # The trainer node's recipe (config/trainer.yaml): labels, anchors and judge from one more pass
     # per source, each pixel keeping its most confident estimate.
@@ -126,6 +139,7 @@ adapt_args() {
 adapt_steps() {
   case "$1" in
     long) echo $((4 * STEPS)) ;;
+    photometric_rehearsal) echo $((2 * STEPS)) ;;
     *) echo "$STEPS" ;;
   esac
 }
