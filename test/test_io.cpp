@@ -3,6 +3,8 @@
 #include <torch/torch.h>
 
 #include <fstream>
+#include <iomanip>
+#include <sstream>
 
 #include "test_util.h"
 #include "unsup_mvs/io/array_io.h"
@@ -117,6 +119,39 @@ TEST(MvsFolder, CamFileRoundTripAndErrors) {
   expect_error(ext + intr + "2.0 0.01 128 1.0\n", "impossible depth range");
   expect_error("extrinsic\n2 0 0 0\n0 1 0 0\n0 0 1 0\n0 0 0 1\n" + intr + "1 0.1\n", "rotation");
   expect_error(ext + "intrinsic\n100 0 50\n0 100 40\n", "file ends");
+}
+
+// 7-Scenes writes its poses with 8 digits: R^T R - I reaches 1e-4. Such a file is read as the
+// nearest rotation; a matrix further off than kMaxRotationRepairError is still refused.
+TEST(MvsFolder, AlmostRotationsAreRepairedAndFarOnesRefused) {
+  const auto dir = test::temp_dir("cam_repair");
+  const Eigen::Matrix3d R = Eigen::AngleAxisd(0.7, Eigen::Vector3d(1, -2, 0.5).normalized()).toRotationMatrix();
+  auto write_with = [&](const Eigen::Matrix3d& M) {
+    std::ostringstream text;
+    text << std::setprecision(17) << "extrinsic\n";
+    for (int r = 0; r < 3; ++r) text << M(r, 0) << " " << M(r, 1) << " " << M(r, 2) << " " << 0.1 * r << "\n";
+    text << "0 0 0 1\nintrinsic\n585 0 320\n0 585 240\n0 0 1\n0.5 0.01 128\n";
+    write_text(dir + "/cam.txt", text.str());
+  };
+  Eigen::Matrix3d noisy = R;
+  noisy(0, 1) += 1.5e-4;  // as rounding of the 7-Scenes files leaves it
+  noisy(2, 0) -= 1.0e-4;
+  ASSERT_GT(orthonormality_error(noisy), 1e-4);
+  write_with(noisy);
+  const Camera repaired = read_cam_file(dir + "/cam.txt").camera;
+  EXPECT_LT(orthonormality_error(repaired.R()), 1e-12);
+  EXPECT_NEAR(repaired.R().determinant(), 1.0, 1e-12);
+  EXPECT_LT(rotation_angle(repaired.R(), R), 2e-4);  // the nearest rotation, not some other one
+  EXPECT_DOUBLE_EQ(repaired.t().y(), 0.1);           // the translation as written
+
+  Eigen::Matrix3d far = R;
+  far(0, 0) += 0.05;
+  write_with(far);
+  EXPECT_THAT([&] { read_cam_file(dir + "/cam.txt"); },
+              testing::ThrowsMessage<std::runtime_error>(testing::HasSubstr("not a proper rotation")));
+  write_with(-R);  // a reflection is no rotation however orthonormal
+  EXPECT_THAT([&] { read_cam_file(dir + "/cam.txt"); },
+              testing::ThrowsMessage<std::runtime_error>(testing::HasSubstr("not a proper rotation")));
 }
 
 TEST(MvsFolder, PairFileRoundTripAndMissingParts) {

@@ -1,5 +1,7 @@
 #include "unsup_mvs/core/camera.h"
 
+#include <Eigen/SVD>
+
 #include <algorithm>
 #include <cmath>
 #include <sstream>
@@ -145,6 +147,17 @@ Camera apply_network_resize(const Camera& camera, const NetworkResize& plan) {
     c = c.resized(plan.scaled_width, plan.scaled_height);
   }
   return c.cropped(plan.crop_x, plan.crop_y, plan.width, plan.height);
+}
+
+double orthonormality_error(const Eigen::Matrix3d& R) {
+  return (R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
+}
+
+Eigen::Matrix3d nearest_rotation(const Eigen::Matrix3d& R) {
+  const Eigen::JacobiSVD<Eigen::Matrix3d> svd(R, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Eigen::Matrix3d D = Eigen::Matrix3d::Identity();
+  D(2, 2) = (svd.matrixU() * svd.matrixV().transpose()).determinant() < 0 ? -1.0 : 1.0;
+  return svd.matrixU() * D * svd.matrixV().transpose();
 }
 
 double rotation_angle(const Eigen::Matrix3d& Ra, const Eigen::Matrix3d& Rb) {

@@ -2,11 +2,13 @@
 
 #include "unsup_mvs/io/inference_folder.h"
 
+#include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
+#include <iostream>
 #include <sstream>
 #include <stdexcept>
 
@@ -29,6 +31,27 @@ double MvsCam::resolved_depth_max(int default_num) const {
   const int n = depth_num > 0 ? depth_num : default_num;
   return depth_min + depth_interval * (n - 1);
 }
+
+namespace {
+
+// Pose files written with few digits hold almost-rotations: those within
+// kMaxRotationRepairError are replaced by the nearest rotation, with one warning per process
+// (a sequence repeats the problem in every file); anything further off is left for validate()
+// to refuse.
+void repair_rotation(Camera& camera, const std::string& path) {
+  const Eigen::Matrix3d R = camera.R();
+  if (!R.allFinite() || R.determinant() <= 0.0) return;
+  const double error = orthonormality_error(R);
+  if (error <= 1e-9 || error > kMaxRotationRepairError) return;
+  camera.T_cam_world.topLeftCorner<3, 3>() = nearest_rotation(R);
+  static std::atomic<bool> warned{false};
+  if (error > 1e-6 && !warned.exchange(true)) {
+    std::cerr << "warning: camera file '" << path << "': rotation re-orthonormalised (R^T R - I max " << error
+              << "); other files of this kind are repaired without a message\n";
+  }
+}
+
+}  // namespace
 
 MvsCam read_cam_file(const std::string& path) {
   checked_file_size(path, kMaxTextFileBytes, "camera file");
@@ -75,6 +98,7 @@ MvsCam read_cam_file(const std::string& path) {
     }
     if (cam.depth_max == 0.0 && cam.depth_interval == 0.0) fail("DEPTH_INTERVAL is 0 and no DEPTH_MAX is given");
   }
+  repair_rotation(cam.camera, path);
   try {
     cam.camera.validate("camera file '" + path + "'");
   } catch (const std::invalid_argument& e) {

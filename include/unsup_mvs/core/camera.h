@@ -67,6 +67,15 @@ NetworkResize plan_network_resize(int width, int height, int max_width, int max_
                                   int multiple = 32);
 Camera apply_network_resize(const Camera& camera, const NetworkResize& plan);
 
+// Largest entry of |R^T R - I|: how far a matrix read from a file is from a rotation.
+double orthonormality_error(const Eigen::Matrix3d& R);
+// The rotation nearest to R in the Frobenius norm (U V^T of its SVD, with det +1). Pose files
+// written with few digits (7-Scenes: R^T R - I up to 1e-4) hold almost-rotations.
+Eigen::Matrix3d nearest_rotation(const Eigen::Matrix3d& R);
+// Pose files whose rotation is off by at most this much are re-orthonormalised with a warning;
+// more is refused as not a rotation.
+constexpr double kMaxRotationRepairError = 1e-2;
+
 // Rotation angle (radians) between two rotation matrices.
 double rotation_angle(const Eigen::Matrix3d& Ra, const Eigen::Matrix3d& Rb);
 
