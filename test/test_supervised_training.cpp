@@ -967,6 +967,7 @@ std::string imported_living_room(const std::string& data, const std::string& nam
   RgbdImportConfig import;
   import.data_dir = data;
   import.out_dir = test::temp_dir(name);
+  import.intrinsics = test::living_room_intrinsics();
   import_rgbd(import);
   return import.out_dir;
 }

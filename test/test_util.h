@@ -9,6 +9,7 @@
 #include <string>
 
 #include "scratch_dirs.h"
+#include "unsup_mvs/io/import.h"
 
 namespace umvs::test {
 
@@ -21,6 +22,14 @@ inline std::string shared_data_dir() {
 
 // A fresh, empty temporary folder for one test.
 inline std::string temp_dir(const std::string& name) { return umvs_scratch::scratch_dir("umvs_test_", name); }
+
+// The rendered living room of ../shared/data (ICL-NUIM's camera: fy < 0, the image's y flipped).
+inline CameraIntrinsics living_room_intrinsics() {
+  CameraIntrinsics in;
+  in.K << 481.2, 0, 319.5, 0, -480.0, 239.5, 0, 0, 1;
+  return in;
+}
+inline const char* kLivingRoomIntrinsicsArgs = "--fx 481.2 --fy=-480.0 --cx 319.5 --cy 239.5";
 
 inline std::string umvs_binary() { return std::string(UMVS_BIN_DIR) + "/umvs"; }
 

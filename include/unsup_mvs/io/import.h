@@ -1,18 +1,30 @@
 // Converting real data sets into MVSNet-format folders (images/, cams/, pair.txt, depth_gt/) that
-// `umvs infer`, `umvs fuse` and `umvs eval` read.
+// `umvs infer`, `umvs fuse`, `umvs eval` and `umvs train` read.
 //  * Middlebury multi-view (templeRing, dinoRing, ...): <name>_par.txt lines
 //    "imgname.png k11..k33 r11..r33 t1 t2 t3" (K and world-to-camera R, t) and a bounding box
 //    (README.txt of the data set or given). Depth ranges come from the box corners seen by each
 //    camera, pair.txt from MVSNet's view-selection score on points sampled in the box.
-//  * RGB-D sequences in the TUM/ICL-NUIM layout used by slambook2: color/N.png, depth/N.png
-//    (or .pgm/.tif with the colour image's stem; 16-bit, value / depth_scale metres, z-depth,
-//    0 = no depth), pose.txt line N = "tx ty tz qx qy qz qw" camera-to-world. Depth becomes
-//    depth_gt/XXXXXXXX.pfm.
-// View ids are the numbers in the file names (templeR0013.png -> 13, color/4.png -> 4).
+//  * Posed RGB-D sequences (RgbdLayout), each frame a colour image, a 16-bit depth image (z-depth,
+//    raw value / depth_scale metres; 0 and 65535 = no depth) and a camera-to-world pose:
+//      slambook:    color/N.png, depth/N.png|.pgm|.tif (same stem), pose.txt line N =
+//                   "tx ty tz qx qy qz qw" (slambook2, ICL-NUIM);
+//      tum:         TUM RGB-D: rgb.txt and depth.txt ("timestamp path"), a pose file
+//                   ("timestamp tx ty tz qx qy qz qw", groundtruth.txt by default), associated by
+//                   nearest timestamp within a tolerance (or by row);
+//      sevenscenes: frame-N.color.{png,jpg}, frame-N.depth.png, frame-N.pose.txt (4x4),
+//                   camera-intrinsics.txt (7-Scenes as tsdf-fusion ships it);
+//      dvmvs:       images/*.png, depth/ (same names), poses.txt (row k = flattened 4x4 of the
+//                   k-th image in name order), K.txt (DeepVideoMVS).
+//    Intrinsics are always explicit: given, or the data set's own intrinsics file. Distortion,
+//    when given, is removed from colour (bilinear) and depth (nearest). Depth becomes
+//    depth_gt/XXXXXXXX.pfm, which only evaluation reads.
+// View ids are the numbers in the file names (templeR0013.png -> 13, color/4.png -> 4), or the
+// row in rgb.txt (tum).
 #pragma once
 
 #include <Eigen/Core>
 #include <string>
+#include <vector>
 
 namespace umvs {
 
@@ -27,15 +39,55 @@ struct MiddleburyImportConfig {
   int num_sources = 10;       // neighbours per view in pair.txt
 };
 
+// Pinhole intrinsics with optional Brown-Conrady distortion (k1 k2 p1 p2 [k3], OpenCV's order).
+struct CameraIntrinsics {
+  Eigen::Matrix3d K = Eigen::Matrix3d::Zero();  // zero = not given
+  std::vector<double> distortion;               // empty or all zero = none
+  bool given() const { return K(2, 2) != 0.0; }
+  bool distorted() const;
+};
+// Intrinsics from a text file: a 3x3 matrix (K.txt, camera-intrinsics.txt), one line
+// "fx fy cx cy [k1 k2 p1 p2 [k3]]", or the YAML keys Camera.fx/fy/cx/cy[/k1/k2/p1/p2/k3] of
+// ORB-SLAM's TUM1-3.yaml. Throws std::runtime_error naming the file and what is missing.
+CameraIntrinsics read_intrinsics_file(const std::string& path);
+
+enum class RgbdLayout { kSlambook, kTum, kSevenScenes, kDvmvs };
+const char* to_string(RgbdLayout layout);
+
 struct RgbdImportConfig {
-  std::string data_dir;       // color/, depth/, pose.txt
+  RgbdLayout layout = RgbdLayout::kSlambook;
+  std::string data_dir;
   std::string out_dir;
-  double fx = 481.2, fy = -480.0, cx = 319.5, cy = 239.5;  // ICL-NUIM (fy < 0: image y flipped)
-  double depth_scale = 5000.0;  // raw 16-bit value / depth_scale = metres
-  double depth_margin = 0.1;    // per-view range [min, max] of the GT depth, widened by this fraction
+  // Required for slambook and tum; sevenscenes and dvmvs read their own file when not given.
+  CameraIntrinsics intrinsics;
+  double depth_scale = 0.0;  // raw 16-bit value per metre; 0 = the layout's (5000 slambook/tum, 1000 the others)
+  // tum: the pose file inside data_dir, how frames are associated ("timestamp": nearest within
+  // tum_max_dt seconds, as TUM's associate.py; "index": row k of each list), the tolerance.
+  std::string tum_pose_file = "groundtruth.txt";
+  std::string tum_association = "timestamp";
+  double tum_max_dt = 0.02;
+  // Which frames (in the layout's order): from `first`, every `every`-th, at most `count` (0 = all).
+  int first = 0, every = 1, count = 0;
+  // A fixed depth range for every view (what a robot configures). 0 = each view's own range from
+  // its sensor depth (min..max), for scoring runs.
+  double depth_near = 0.0, depth_far = 0.0;
+  double depth_margin = 0.1;  // the range widened by this fraction of its length each side
   int depth_num = 192;
   int num_sources = 10;
+  // Sources whose camera centre is this far from the reference's (metres) rank first; 0 = any.
+  double min_baseline = 0.0, max_baseline = 0.0;
 };
+
+// One frame of a posed RGB-D sequence.
+struct RgbdFrame {
+  int id = 0;
+  std::string color_path, depth_path;
+  Eigen::Matrix4d T_world_cam = Eigen::Matrix4d::Identity();
+};
+// The frames that config.layout lists in config.data_dir, after first/every/count. Throws
+// std::runtime_error naming the file and line for missing files, malformed lines, non-unit
+// quaternions, frames without a depth image or a pose within the tolerance.
+std::vector<RgbdFrame> list_rgbd_frames(const RgbdImportConfig& config);
 
 struct ImportSummary {
   int views = 0;
