@@ -152,3 +152,45 @@ TEST(SampleDepthAtCamera, ATurnedEstimateIsComparedPixelForPixelOnlyWhenAllowed)
 
 }  // namespace
 }  // namespace umvs
+
+namespace umvs {
+namespace {
+
+TEST(Sparsification, AConfidenceThatRanksTheErrorsFollowsTheOracle) {
+  // Errors 0.01 .. 1.00; a confidence that orders them exactly, one that orders them backwards,
+  // and a constant one.
+  const auto err = torch::arange(1, 101, torch::kFloat64) / 100;
+  const auto perfect = sparsification_curve(err, 1.0 - err, 10);
+  ASSERT_EQ(perfect.kept.size(), 10u);
+  EXPECT_DOUBLE_EQ(perfect.kept.front(), 0.1);
+  EXPECT_NEAR(perfect.abs_rel.front(), 0.055, 1e-12);  // mean of 0.01 .. 0.10
+  EXPECT_NEAR(perfect.abs_rel.back(), 0.505, 1e-12);   // every pixel
+  EXPECT_NEAR(perfect.ause, 0.0, 1e-12);
+  const auto backwards = sparsification_curve(err, err, 10);
+  EXPECT_NEAR(backwards.abs_rel.front(), 0.955, 1e-12);  // mean of 0.91 .. 1.00
+  EXPECT_NEAR(backwards.oracle.front(), 0.055, 1e-12);
+  EXPECT_GT(backwards.ause, 0.3);
+  const auto flat = sparsification_curve(err, torch::ones_like(err), 10);
+  EXPECT_GT(flat.ause, 0.1);
+  EXPECT_LT(flat.ause, backwards.ause);
+  EXPECT_THROW(sparsification_curve(err, torch::ones({3}), 10), std::invalid_argument);
+}
+
+TEST(DepthMapPoints, BackProjectsValidPixelsIntoTheWorld) {
+  Camera cam;
+  cam.K << 10, 0, 1.5, 0, 10, 1.5, 0, 0, 1;
+  cam.width = 4;
+  cam.height = 4;
+  cam.T_cam_world.topRightCorner<3, 1>() = Eigen::Vector3d(0, 0, -1);  // camera at z = +1 in the world
+  auto depth = torch::full({4, 4}, 2.0f);
+  depth[0][0] = 0.0f;
+  depth[1][1] = std::numeric_limits<float>::quiet_NaN();
+  const auto all = depth_map_points(depth, cam, 1);
+  EXPECT_EQ(all.size(), 14u);
+  for (const auto& p : all.points) EXPECT_NEAR(p.z(), 3.0f, 1e-6);  // 2 m in front of a camera at z = 1
+  EXPECT_EQ(depth_map_points(depth, cam, 2).size(), 3u);              // (0,2), (2,0), (2,2); (0,0) has none
+  EXPECT_THROW(depth_map_points(torch::ones({3, 4}), cam, 1), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace umvs

@@ -222,6 +222,59 @@ std::vector<double> nearest_distances(const std::vector<Eigen::Vector3f>& querie
   return out;
 }
 
+Sparsification sparsification_curve(const torch::Tensor& rel_error, const torch::Tensor& confidence, int steps) {
+  if (steps < 1) throw std::invalid_argument("sparsification needs at least one step");
+  const auto err = rel_error.reshape({-1}).to(torch::kFloat64);
+  const auto conf = confidence.reshape({-1}).to(torch::kFloat64);
+  if (err.numel() != conf.numel()) throw std::invalid_argument("sparsification: errors and confidences differ in count");
+  Sparsification out;
+  const int64_t n = err.numel();
+  if (n == 0) return out;
+  // Cumulative sums of the errors in each order: the mean of the first k is one lookup. Pixels of
+  // equal confidence cannot be told apart, so each takes its group's mean error (the expected
+  // curve over every order of the ties): a constant confidence gives a flat curve.
+  const auto [sorted_conf, order] = conf.sort(/*stable=*/true, 0, /*descending=*/true);
+  auto by_confidence = err.index_select(0, order);
+  const auto [groups, group_of, group_size] = torch::unique_consecutive(sorted_conf, /*return_inverse=*/true, /*return_counts=*/true);
+  if (groups.numel() < n) {
+    const auto group_sum = torch::zeros({groups.numel()}, by_confidence.options()).index_add_(0, group_of, by_confidence);
+    by_confidence = (group_sum / group_size.to(torch::kFloat64)).index_select(0, group_of);
+  }
+  const auto by_error = std::get<0>(err.sort(/*stable=*/true, 0, /*descending=*/false));
+  const auto cum_conf = by_confidence.cumsum(0), cum_oracle = by_error.cumsum(0);
+  const auto c = cum_conf.accessor<double, 1>(), o = cum_oracle.accessor<double, 1>();
+  double gap = 0.0;
+  for (int s = 1; s <= steps; ++s) {
+    const int64_t k = std::max<int64_t>(1, static_cast<int64_t>(std::llround(static_cast<double>(n) * s / steps)));
+    out.kept.push_back(static_cast<double>(s) / steps);
+    out.abs_rel.push_back(c[k - 1] / k);
+    out.oracle.push_back(o[k - 1] / k);
+    gap += out.abs_rel.back() - out.oracle.back();
+  }
+  out.ause = gap / steps;
+  return out;
+}
+
+PointCloud depth_map_points(const torch::Tensor& depth, const Camera& camera, int stride) {
+  if (depth.dim() != 2) throw std::invalid_argument("depth_map_points: depth must be [H,W]");
+  if (depth.size(0) != camera.height || depth.size(1) != camera.width) {
+    throw std::invalid_argument("depth_map_points: the camera is " + std::to_string(camera.width) + "x" + std::to_string(camera.height) +
+                                ", the depth map " + std::to_string(depth.size(1)) + "x" + std::to_string(depth.size(0)));
+  }
+  if (stride < 1) throw std::invalid_argument("depth_map_points: stride must be >= 1");
+  const auto d = depth.to(torch::kFloat32).contiguous();
+  const auto a = d.accessor<float, 2>();
+  PointCloud cloud;
+  for (int64_t v = 0; v < d.size(0); v += stride) {
+    for (int64_t u = 0; u < d.size(1); u += stride) {
+      const float z = a[v][u];
+      if (!(z > 0.0f) || !std::isfinite(z)) continue;
+      cloud.points.push_back(camera.backproject(static_cast<double>(u), static_cast<double>(v), z).cast<float>());
+    }
+  }
+  return cloud;
+}
+
 PointCloud downsample_min_spacing(const PointCloud& cloud, double spacing) {
   if (!(spacing > 0.0) || !std::isfinite(spacing)) throw std::invalid_argument("downsample spacing must be positive and finite");
   // Hash grid with cells of size `spacing`: a kept point's neighbours within `spacing` lie in the

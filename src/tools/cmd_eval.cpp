@@ -101,6 +101,12 @@ int eval_depth(int argc, char** argv) {
       .option("max-turn-deg", "0",
               "accept estimates whose cameras are turned by up to this many degrees from GT's, as after "
               "`umvs refine-poses`: the images are the same, so depth is compared pixel for pixel (0 = same pose only)")
+      .flag("sparsification",
+            "also judge the confidence (EST/confidence/): the abs rel of the most confident 10 %, 20 %, ... of the "
+            "pixels beside the oracle's (AUSE), and for each --confidence-levels the share of the image at or above "
+            "it with its abs rel and share within --confident-within")
+      .option("confidence-levels", "0.5,0.8", "confidence floors reported with --sparsification")
+      .option("confident-within", "0.1", "relative error counted as right at those floors")
       .flag("json", "print JSON instead of a table");
   if (!args.parse(argc, argv)) return 0;
   umvs::configure_threads(0);
@@ -150,6 +156,12 @@ int eval_depth(int argc, char** argv) {
   }
   if (ids.empty()) throw std::runtime_error("no depth maps XXXXXXXX.pfm in " + est_dir);
 
+  const bool sparsification = args.on("sparsification");
+  const std::vector<double> levels = parse_reals(args, "confidence-levels");
+  const double confident_within = args.real("confident-within");
+  std::vector<torch::Tensor> scored_errors, scored_confidences;  // --sparsification: per evaluated pixel
+  std::vector<umvs::ConfidentPixels> confident(levels.size());
+  for (size_t i = 0; i < levels.size(); ++i) confident[i].level = levels[i];
   std::vector<umvs::DepthMetrics> per_view, per_view_seen, per_view_unseen;
   for (int id : ids) {
     const std::string stem = umvs::view_file_stem(id);
@@ -189,6 +201,26 @@ int eval_depth(int argc, char** argv) {
       valid = conf >= min_conf;
     }
     per_view.push_back(umvs::evaluate_depth(est, gt, valid, cfg));
+    if (sparsification) {
+      const std::string conf_path = umvs::InferenceFolder(est_root).confidence_path(id);
+      if (!fs::exists(conf_path)) throw std::runtime_error("--sparsification needs the confidence maps, and " + conf_path + " is missing");
+      const auto conf = umvs::read_pfm(conf_path);
+      if (conf.sizes() != est.sizes()) throw std::runtime_error(conf_path + " does not match the size of its depth map");
+      const auto has_estimate = (est > 0) & torch::isfinite(est);
+      const auto scored = has_estimate & (gt > 0) & torch::isfinite(gt);
+      const auto error = ((est - gt).abs() / gt).masked_select(scored);
+      scored_errors.push_back(error);
+      scored_confidences.push_back(conf.masked_select(scored));
+      for (auto& c : confident) {
+        const auto above = conf >= c.level;
+        c.pixels += est.numel();
+        c.confident += (above & has_estimate).sum().item<int64_t>();
+        const auto e = error.masked_select(conf.masked_select(scored) >= c.level);
+        c.scored += e.numel();
+        c.abs_rel += e.sum().item<double>();                           // a sum until the end
+        c.within += (e <= confident_within).sum().item<double>();      // a count until the end
+      }
+    }
     if (covisibility_sources > 0) {
       if (ground_truth.camera.width == 0) throw std::runtime_error("--covisibility-sources needs the camera " + gt_cam);
       const auto pair = std::find_if(pairs.begin(), pairs.end(), [id](const umvs::ViewPair& p) { return p.ref == id; });
@@ -214,8 +246,25 @@ int eval_depth(int argc, char** argv) {
     return s.gt_pixels + u.gt_pixels > 0 ? static_cast<double>(s.gt_pixels) / (s.gt_pixels + u.gt_pixels) : 0.0;
   };
 
+  umvs::Sparsification curve;
+  if (sparsification) {
+    for (auto& c : confident) {
+      c.abs_rel = c.scored > 0 ? c.abs_rel / c.scored : std::nan("");
+      c.within = c.scored > 0 ? c.within / c.scored : std::nan("");
+    }
+    curve = umvs::sparsification_curve(torch::cat(scored_errors), torch::cat(scored_confidences));
+  }
+
   if (args.on("json")) {
     nlohmann::ordered_json out = {{"rel_thresholds", cfg.rel_thresholds}, {"abs_thresholds", cfg.abs_thresholds}};
+    if (sparsification) {
+      out["sparsification"] = {{"kept", curve.kept}, {"abs_rel", curve.abs_rel}, {"oracle", curve.oracle}, {"ause", curve.ause}};
+      out["confident"] = nlohmann::ordered_json::array();
+      for (const auto& c : confident) {
+        out["confident"].push_back({{"level", c.level}, {"image_share", c.image_share()}, {"scored_pixels", c.scored},
+                                    {"abs_rel", c.abs_rel}, {"within", c.within}, {"within_rel", confident_within}});
+      }
+    }
     out["views"] = nlohmann::ordered_json::array();
     for (size_t i = 0; i < ids.size(); ++i) {
       nlohmann::ordered_json view = {{"view", ids[i]}};
@@ -263,16 +312,68 @@ int eval_depth(int argc, char** argv) {
     std::printf("seen: %s %% of the ground-truth pixels lie in one of the first %d neighbours' views, unhidden\n",
                 pct(seen_share(seen, unseen)).c_str(), covisibility_sources);
   }
+  if (sparsification) {
+    std::printf("\nsparsification (abs rel of the most confident share of the evaluated pixels; oracle: of least error)\n");
+    std::printf("    kept%%  abs rel   oracle\n");
+    for (size_t i = 0; i < curve.kept.size(); ++i) {
+      std::printf("  %6.0f  %7.4f  %7.4f\n", 100 * curve.kept[i], curve.abs_rel[i], curve.oracle[i]);
+    }
+    std::printf("AUSE %.4f\n\n", curve.ause);
+    std::printf("confidence >=   image%%   abs rel   within %g%%\n", 100 * confident_within);
+    for (const auto& c : confident) {
+      std::printf("%13g  %7s  %8s  %10s\n", c.level, pct(c.image_share()).c_str(), num(c.abs_rel, "%8.4f").c_str(), pct(c.within).c_str());
+    }
+  }
   return 0;
+}
+
+// The points of every view's sensor depth in an imported RGB-D folder, thinned to `spacing`.
+umvs::PointCloud sensor_depth_cloud(const std::string& folder, std::vector<int> ids, int stride, double spacing) {
+  if (stride < 1) throw std::invalid_argument("--gt-stride must be >= 1");
+  if (!(spacing >= 0) || !std::isfinite(spacing)) throw std::invalid_argument("--gt-spacing must be >= 0");
+  const std::string depth_dir = folder + "/depth_gt";
+  if (!fs::is_directory(depth_dir)) throw std::runtime_error("--gt-depth: " + folder + " has no depth_gt/ (import an RGB-D set with umvs import)");
+  if (ids.empty()) {
+    for (const auto& e : fs::directory_iterator(depth_dir)) {
+      const std::string stem = e.path().stem().string();
+      if (e.path().extension() == ".pfm" && stem.size() == 8 && stem.find_first_not_of("0123456789") == std::string::npos) {
+        ids.push_back(std::stoi(stem));
+      }
+    }
+    std::sort(ids.begin(), ids.end());
+  }
+  if (ids.empty()) throw std::runtime_error("--gt-depth: no XXXXXXXX.pfm in " + depth_dir);
+  umvs::PointCloud cloud;
+  for (int id : ids) {
+    const std::string stem = umvs::view_file_stem(id);
+    const std::string depth_path = depth_dir + "/" + stem + ".pfm";
+    if (!fs::exists(depth_path)) throw std::runtime_error("--gt-depth: view " + std::to_string(id) + " has no " + depth_path);
+    const auto depth = umvs::read_pfm(depth_path);
+    umvs::Camera camera = umvs::read_cam_file(folder + "/cams/" + stem + "_cam.txt").camera;
+    camera.width = static_cast<int>(depth.size(1));
+    camera.height = static_cast<int>(depth.size(0));
+    cloud.append(umvs::depth_map_points(depth, camera, stride));
+    // Thin as we go, so that hundreds of views never hold all their points at once.
+    if (spacing > 0 && cloud.size() > 4000000) cloud = umvs::downsample_min_spacing(cloud, spacing);
+  }
+  return spacing > 0 ? umvs::downsample_min_spacing(cloud, spacing) : cloud;
 }
 
 int eval_cloud(int argc, char** argv) {
   umvs::Args args("eval cloud",
                   "DTU-style accuracy (EST -> GT nearest-neighbour distance) and completeness (GT -> EST), mean and\n"
                   "median, distances above --max-dist left out as outliers; overall = mean of the two means.\n"
-                  "Tanks-and-Temples precision, recall and F-score at each --thresholds distance. Distances in scene units.");
+                  "Tanks-and-Temples precision, recall and F-score at each --thresholds distance. Distances in scene units.\n"
+                  "The ground truth is a cloud (--gt) or an RGB-D set's sensor depth (--gt-depth: umvs import's folder);\n"
+                  "for a robot's log, e.g. --gt-depth DATA --thresholds 0.02,0.05,0.1 (metres).");
   args.required("est", "estimated cloud (.ply or .pcd)")
-      .required("gt", "ground-truth cloud (.ply or .pcd), e.g. gt.ply of a `umvs synth` folder")
+      .option("gt", "", "ground-truth cloud (.ply or .pcd), e.g. gt.ply of a `umvs synth` folder")
+      .option("gt-depth", "",
+              "or: a folder of sensor depth (depth_gt/, cams/: `umvs import` of an RGB-D set), back-projected as the "
+              "ground truth")
+      .option("gt-views", "", "with --gt-depth: comma-separated view ids (default: every view)")
+      .option("gt-stride", "2", "with --gt-depth: every N-th pixel each way")
+      .option("gt-spacing", "0.01", "with --gt-depth: the reference thinned to this spacing (scene units; 0 = no)")
       .option("max-dist", "0", "outlier cap: distances above it are left out of the means (DTU: 0.02 m); 0 = none")
       .option("thresholds", "0.002,0.005,0.01", "precision/recall thresholds (comma-separated)")
       .option("downsample", "0", "first reduce both clouds to this minimum spacing (DTU: 0.0002 m); 0 = no")
@@ -283,8 +384,11 @@ int eval_cloud(int argc, char** argv) {
   cfg.max_distance = args.real("max-dist");
   cfg.thresholds = parse_reals(args, "thresholds");
   cfg.downsample_spacing = args.real("downsample");
+  if (args.given("gt") == args.given("gt-depth")) throw std::invalid_argument("give one of --gt CLOUD and --gt-depth FOLDER");
   const auto est = umvs::read_cloud(args.str("est"));
-  const auto gt = umvs::read_cloud(args.str("gt"));
+  const auto gt = args.given("gt") ? umvs::read_cloud(args.str("gt"))
+                                   : sensor_depth_cloud(args.str("gt-depth"), args.integers("gt-views"), args.integer("gt-stride"),
+                                                        args.real("gt-spacing"));
   if (est.empty()) throw std::runtime_error("estimated cloud " + args.str("est") + " has no points: nothing to evaluate");
   if (gt.empty()) throw std::runtime_error("ground-truth cloud " + args.str("gt") + " has no points");
   const umvs::CloudMetrics m = umvs::evaluate_cloud(est, gt, cfg);
@@ -299,7 +403,8 @@ int eval_cloud(int argc, char** argv) {
     std::cout << out.dump(1) << "\n";
     return 0;
   }
-  std::cout << "cloud: " << args.str("est") << " (" << m.est_points << " points) vs " << args.str("gt") << " ("
+  std::cout << "cloud: " << args.str("est") << " (" << m.est_points << " points) vs "
+            << (args.given("gt") ? args.str("gt") : "sensor depth of " + args.str("gt-depth")) << " ("
             << m.gt_points << " points)" << (cfg.downsample_spacing > 0 ? ", after downsampling" : "") << "\n";
   std::printf("              mean      median   outliers%%\n");
   std::printf("accuracy  %10s  %10s   %7s\n", num(m.accuracy_mean).c_str(), num(m.accuracy_median).c_str(), pct(m.accuracy_outliers).c_str());

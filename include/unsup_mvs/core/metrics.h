@@ -76,8 +76,38 @@ struct DepthView {
 torch::Tensor covisible_by_ground_truth(const torch::Tensor& ref_gt, const Camera& ref_camera,
                                         const std::vector<DepthView>& sources, double max_relative_depth = 0.03);
 
+// Whether confidence ranks errors (Ilg et al. 2018, "uncertainty estimates and multi-hypotheses
+// networks for optical flow"): keep the most confident share of the evaluated pixels and take
+// their abs rel; the oracle keeps the pixels of least error instead. A confidence that ranks
+// well follows the oracle; AUSE is the mean gap between the two over the shares (0 = perfect).
+//   rel_error, confidence: [N] over the evaluated pixels (any shape; flattened).
+struct Sparsification {
+  std::vector<double> kept;     // shares of the pixels kept: 1/steps .. 1
+  std::vector<double> abs_rel;  // abs rel of the most confident `kept` share
+  std::vector<double> oracle;   // abs rel of the `kept` share of least error
+  double ause = 0.0;            // mean of abs_rel - oracle
+};
+Sparsification sparsification_curve(const torch::Tensor& rel_error, const torch::Tensor& confidence, int steps = 10);
+
+// What a planner reading the map at a confidence floor gets: the share of the depth map's pixels
+// at or above it, and of those with ground truth, the abs rel and the share within `within_rel`.
+struct ConfidentPixels {
+  double level = 0.0;
+  int64_t pixels = 0;          // pixels of the depth maps
+  int64_t confident = 0;       // ... with confidence >= level and an estimate
+  int64_t scored = 0;          // ... of which have ground truth
+  double abs_rel = 0.0;        // over `scored` (NaN when none)
+  double within = 0.0;         // share of `scored` within within_rel
+  double image_share() const { return pixels > 0 ? static_cast<double>(confident) / pixels : 0.0; }
+};
+
 // ---------------------------------------------------------------------------------------------
 // Point clouds
+
+// The points of a depth map ([H,W] metres, <= 0 or non-finite = none) seen by `camera` (of the
+// same size), every `stride`-th pixel each way, in world coordinates: the reference cloud of a
+// sensor's depth for scoring a fused cloud.
+PointCloud depth_map_points(const torch::Tensor& depth, const Camera& camera, int stride = 1);
 
 struct CloudMetricsConfig {
   // Distances above this are outliers, left out of the means and medians (DTU: 20 mm); 0 = keep all.
