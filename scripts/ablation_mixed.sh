@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Issue 13's training ablation, small and on the CPU: which label-free data makes the depth?
+# The training-data ablation, small and on the CPU: which label-free data makes the depth?
 #   supervised    rendered scenes, smooth L1 on their exact depth only
 #   photometric   rendered scenes and the real templeRing images, robust photometric loss only
 #                 (the paper's method: no label anywhere)
@@ -41,7 +41,7 @@ heldout="$(cat "$RENDERED/heldout.txt")"
 [ -f "$WORK/data/templeRing/pair.txt" ] ||
   "$UMVS" import middlebury --data "$SHARED/templeRing" --out "$WORK/data/templeRing" >/dev/null
 [ -f "$WORK/data/livingroom/pair.txt" ] ||
-  "$UMVS" import rgbd --data "$SHARED/livingroom" --out "$WORK/data/livingroom" >/dev/null
+  "$UMVS" import rgbd --data "$SHARED/livingroom" --out "$WORK/data/livingroom" --fx 481.2 --fy=-480.0 --cx 319.5 --cy 239.5 >/dev/null
 temple="$WORK/data/templeRing"
 
 common=(--width "$WIDTH" --height "$HEIGHT" --num-depth "$NUM_DEPTH" --depth-sampling inverse_depth

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# docs/results.md, "the reload rule audited": how often the trainer node's label-free rule
+# docs/results.md, "The reload rule audited": how often the trainer node's label-free rule
 # (decide_reload: held-out photometric loss at least 1 % lower AND multi-view consistency at least
 # one point higher) serves a model whose depth got worse, in the node's own setting. Each rendered
 # scene is written as a robot log (`umvs bag`, 10 keyframes, every 5th held out); the served model
@@ -16,7 +16,7 @@
 #                ADAPT ("photometric self": photometric, and plain self-training (--anchor-unconfirmed 0);
 #                also "confident", self-training as umvs train does it by default (anchored
 #                where the start model is confident, --anchor-min-confidence 0.5), "anchored",
-#                every unconfirmed pixel anchored (the default before 2026-12-03), "unseen",
+#                every unconfirmed pixel anchored (--anchor-min-confidence 0), "unseen",
 #                "confident" plus the pixels no loss view sees (--anchor-unseen 1), "teacher",
 #                "confident" with labels, anchors and the rule's consistency from one pass per
 #                source as well (--source-combination most_confident), and "aggressive", 10x the
@@ -99,7 +99,7 @@ for spec in $SCENES; do
   fi
   render "$data" "$scene" "$seed"
   # The trainer node's train_args (config/trainer.yaml) less its --self-training-every, which ADAPT
-  # chooses ("confident" is the node's default, "photometric" the node before 2026-12-03), and the
+  # chooses ("confident" is `umvs train`'s default self-training, "photometric" the loss alone), and the
   # scene's depth range.
   common="--bag $data.bag --width 320 --height 256 --num-depth 64 --holdout-every 5 $(depth_range "$data") --threads $THREADS"
   if [ "$SECOND_PASS" = 1 ]; then

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# docs/results.md, "Default model" table: depth accuracy of models on targets none of them was
+# docs/results.md, "Comparison with MVSNet_pytorch": depth accuracy of models on targets none of them was
 # trained on, before and after label-free adaptation to the target images themselves (Khot et al.
 # 2019, Table 5 style: ground truth only scores).
 #   models:  new = models/unsup_mvsnet.pt; old = the previous default model (git OLD_REV);
@@ -30,7 +30,7 @@
 #                ADAPT ("none photometric self"), ADAPT_MODELS ("new mvsnet") and ADAPT_TARGETS
 #                ("livingroom templeRing"): which models are adapted on which targets (others: "-"),
 #                EVAL_TUPLES (0 = all): rendered reference views scored (evenly spread),
-#                OLD_REV (default model before issue 13: 6fd5413), COMPLETION (templeRing's
+#                OLD_REV (the old photometric-only default model: 6fd5413), COMPLETION (templeRing's
 #                `umvs infer --complete-below-confidence`, 0: the network's own maps, as every
 #                table since stage 3 was measured; 0.7 is infer's default), SOURCES (templeRing's
 #                `umvs infer --source-combination`, variance: as the tables were measured)
@@ -78,7 +78,7 @@ for spec in "room 301" "facade 302" "dtu_like 303"; do
 done
 rendered=$(IFS=,; echo "${rendered_dirs[*]}")
 [ -f "$WORK/data/livingroom/pair.txt" ] ||
-  "$UMVS" import rgbd --data "$SHARED/livingroom" --out "$WORK/data/livingroom" >/dev/null
+  "$UMVS" import rgbd --data "$SHARED/livingroom" --out "$WORK/data/livingroom" --fx 481.2 --fy=-480.0 --cx 319.5 --cy 239.5 >/dev/null
 [ -f "$WORK/data/templeRing/pair.txt" ] ||
   "$UMVS" import middlebury --data "$SHARED/templeRing" --out "$WORK/data/templeRing" >/dev/null
 # Rendered training scenes for the rehearsal adaptation (rendered on first use; seeds 1000-1001).
@@ -118,13 +118,13 @@ adapt_args() {
     # were: batch-1 steps on a few target images otherwise replace them with the target's.
     photometric_frozen_bn) echo "--batchnorm frozen" ;;
     # The robust loss at a fine-tuning rate (chosen on a fresh rendered table-top scene among 3e-4
-    # and 1e-4, docs/results.md, twenty-eighth session) instead of the from-scratch 1e-3.
+    # and 1e-4, docs/results.md, "Rejected ideas") instead of the from-scratch 1e-3.
     photometric_low_lr) echo "--lr 3e-4" ;;
-    # The same at a tenth of the training rate (docs/results.md, twenty-ninth session).
+    # The same at a tenth of the training rate (docs/results.md, "Rejected ideas").
     photometric_lr1e-4) echo "--lr 1e-4" ;;
     # The robust loss on the target with half of the steps supervised on rendered training scenes
     # (scripts/render_training_scenes.sh: two of each recipe, procedural textures), so that the
-    # model keeps what it learnt there (docs/results.md, thirty-first session).
+    # model keeps what it learnt there (docs/results.md, "Rejected ideas").
     photometric_rehearsal) echo "--supervised-data $(rehearsal_scenes) --supervised-share 0.5 --supervised-weight 0.1" ;;
     self) echo "--self-training-every 25" ;;
     # The trainer node's recipe (config/trainer.yaml): labels, anchors and judge from one more pass
