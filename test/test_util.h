@@ -29,7 +29,6 @@ inline CameraIntrinsics living_room_intrinsics() {
   in.K << 481.2, 0, 319.5, 0, -480.0, 239.5, 0, 0, 1;
   return in;
 }
-inline const char* kLivingRoomIntrinsicsArgs = "--fx 481.2 --fy=-480.0 --cx 319.5 --cy 239.5";
 
 inline std::string umvs_binary() { return std::string(UMVS_BIN_DIR) + "/umvs"; }
 
