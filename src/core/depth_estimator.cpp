@@ -103,7 +103,45 @@ void DepthEstimatorConfig::validate() const {
     throw std::invalid_argument("source_rotation_search_deg must be an angle >= 0 (0 = off), got " +
                                 std::to_string(source_rotation_search_deg));
   }
+  if (!std::isfinite(min_parallax_px) || min_parallax_px < 0) {
+    throw std::invalid_argument("min_parallax_px must be >= 0 pixels (0 = off), got " + std::to_string(min_parallax_px));
+  }
   completion.validate();
+}
+
+torch::Tensor parallax_shift_px(const torch::Tensor& depth, const Camera& depth_camera, const std::vector<Camera>& sources,
+                                double relative_change) {
+  if (depth.dim() != 2 || depth.size(0) != depth_camera.height || depth.size(1) != depth_camera.width) {
+    throw std::invalid_argument("parallax_shift_px: the depth map must be [h,w] of its camera's size");
+  }
+  const auto f64 = torch::TensorOptions().dtype(torch::kFloat64);
+  const int64_t h = depth.size(0), w = depth.size(1);
+  const auto d = depth.to(torch::kFloat64).reshape({1, -1});
+  const auto v = torch::arange(h, f64).view({h, 1}).expand({h, w}).reshape({1, -1});
+  const auto u = torch::arange(w, f64).view({1, w}).expand({h, w}).reshape({1, -1});
+  const auto eigen = [&](const auto& m) {
+    const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> row_major = m;
+    return torch::from_blob(const_cast<double*>(row_major.data()), {row_major.rows(), row_major.cols()}, f64).clone();
+  };
+  // Rays in the world: X(d) = C + d * ray, ray = R^T K^-1 (u, v, 1).
+  const auto rays = eigen(depth_camera.R().transpose() * depth_camera.K.inverse()).matmul(torch::cat({u, v, torch::ones_like(u)}, 0));
+  const auto center = eigen(depth_camera.center());
+  auto largest = torch::zeros({1, h * w}, f64);
+  const auto valid = (d > 0) & torch::isfinite(d);
+  const auto d0 = d.where(valid, torch::ones_like(d));
+  for (const auto& source : sources) {
+    const auto P = eigen(source.K * source.T_cam_world.topRows<3>());  // 3x4
+    const auto project = [&](const torch::Tensor& z) {
+      const auto X = center + rays * z;
+      const auto x = P.slice(1, 0, 3).matmul(X) + P.slice(1, 3, 4);
+      return std::make_pair(x.slice(0, 0, 2) / x.slice(0, 2, 3), x.slice(0, 2, 3) > 0);
+    };
+    const auto [a, a_front] = project(d0);
+    const auto [b, b_front] = project(d0 * (1.0 + relative_change));
+    const auto shift = (a - b).norm(2, 0, true);
+    largest = torch::maximum(largest, shift.where(a_front & b_front & torch::isfinite(shift), torch::zeros_like(shift)));
+  }
+  return largest.where(valid, torch::zeros_like(largest)).view({h, w}).to(torch::kFloat32);
 }
 
 DepthEstimator::DepthEstimator(MvsNet model, torch::Device device, DepthEstimatorConfig config)
@@ -245,6 +283,12 @@ DepthMap DepthEstimator::estimate(const std::vector<ViewInput>& views, double de
   map.depth = out.depth.squeeze(0).to(torch::kCPU);
   map.confidence = out.confidence.squeeze(0).to(torch::kCPU);
   map.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  if (config_.min_parallax_px > 0) {
+    const std::vector<Camera> sources(cameras.begin() + 1, cameras.end());
+    const auto shift = parallax_shift_px(map.depth, depth_map_camera(cameras.front()), sources);
+    map.unresolvable = shift < config_.min_parallax_px;
+    map.confidence = map.confidence.masked_fill(map.unresolvable, 0.0f);
+  }
   if (config_.completion.enabled()) {
     const auto t1 = std::chrono::steady_clock::now();
     // The guide is the reference's grey level averaged over each depth pixel's 4x4 input pixels.

@@ -104,6 +104,7 @@ InferenceNodeConfig inference_node_config_from_ros(const ros::NodeHandle& nh) {
   c.estimator.source_combination = umvs::source_combination_from_string(source_combination);
   nh.param("source_rotation_search_deg", c.estimator.source_rotation_search_deg, c.estimator.source_rotation_search_deg);
   nh.param("complete_below_confidence", c.estimator.completion.min_confidence, c.estimator.completion.min_confidence);
+  nh.param("min_parallax_px", c.estimator.min_parallax_px, c.estimator.min_parallax_px);
   nh.param("rectified", c.rectified, c.rectified);
   nh.param("checkpoint", c.checkpoint, c.checkpoint);
   nh.param("max_image_pixels", c.max_image_pixels, c.max_image_pixels);

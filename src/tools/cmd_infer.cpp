@@ -73,6 +73,9 @@ UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
               "(edge-aware, a wall is filled as a plane; dense depth maps where the network has no evidence: plain walls, "
               "parts no source sees; measured in docs/results.md; the confidence maps stay as the network gave them; "
               "0 = off: the network's own depth)")
+      .option("min-parallax-px", umvs::kRecommendedMinParallaxPx,
+              "confidence 0 (unknown) where a 10 % change of depth moves the pixel by less than this many pixels in "
+              "every source: too little parallax to tell depth (a camera turning in place, a short baseline); 0 = off")
       .option("num-depth", "0", "depth planes (multiple of 8; 0 = 128 at 640 wide, scaled with the width)")
       .option("depth-sampling", "", "depth|inverse_depth (default: the checkpoint's)")
       .option("feature-warp", "", "exact|mvsnet_pytorch: where the cost volume samples the source views (default: the checkpoint's)")
@@ -106,6 +109,7 @@ UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
   cfg.max_height = args.integer("max-height");
   cfg.source_rotation_search_deg = args.real("source-rotation-search");
   cfg.completion.min_confidence = args.real("complete-below-confidence");
+  cfg.min_parallax_px = args.real("min-parallax-px");
   if (!(cfg.completion.min_confidence >= 0 && cfg.completion.min_confidence < 1)) {
     throw std::invalid_argument("--complete-below-confidence must be a confidence in [0,1) (0 = off), got " +
                                 args.str("complete-below-confidence"));

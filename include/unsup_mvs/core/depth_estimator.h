@@ -62,9 +62,27 @@ struct DepthEstimatorConfig {
   // Completion of the pixels below a confidence floor from the confident ones (core/depth_completion.h;
   // off by default). The confidence map is left as the network gave it.
   DepthCompletionConfig completion = {};
+  // "Unknown" where the views cannot tell depth: a pixel whose projection moves by less than this
+  // many pixels (of the network input) in every source when its depth changes by
+  // kParallaxDepthChange gets confidence 0. A camera turning in place, or a baseline too short
+  // for the depth, gives the cost volume nothing to match, and the network's guess there can be
+  // confidently wrong. 0 = off. Applied before completion, which then fills such pixels.
+  double min_parallax_px = 0.0;
 
   void validate() const;  // throws std::invalid_argument naming the field
 };
+
+// The relative depth change by which min_parallax_px is judged.
+constexpr double kParallaxDepthChange = 0.1;
+// What `umvs infer` and the inference nodelet use for min_parallax_px.
+constexpr double kRecommendedMinParallaxPx = 1.0;
+
+// Per pixel of a depth map, the largest shift over the sources (in pixels of each source camera)
+// of the pixel's projection when its depth d becomes d * (1 + relative_change).
+//   depth [h,w] metres (<= 0: shift 0), depth_camera of that size, sources: cameras of any size.
+//   -> [h,w] float32
+torch::Tensor parallax_shift_px(const torch::Tensor& depth, const Camera& depth_camera, const std::vector<Camera>& sources,
+                                double relative_change = kParallaxDepthChange);
 
 // Coordinate search for the rotation (degrees about x, y, z) that maximises `score`: from zero,
 // steps of 0.4, 0.2 and 0.1 degrees along each axis while the score rises, each angle within
@@ -99,6 +117,8 @@ struct DepthMap {
   double completion_seconds = 0.0;   // DepthEstimatorConfig::completion's time (0 when off)
   DepthCompletionStats completion;   // what it did (zeros when off)
   MvsStageTimes stages;      // where the first pass's network time went (CPU fast path only)
+  // [h,w] bool: pixels set to confidence 0 by min_parallax_px (undefined when it is off).
+  torch::Tensor unresolvable;
   bool per_source_passes = false;  // whether the passes of each source alone ran (most_confident, or auto on an unsure map)
   // Per source view, what DepthEstimatorConfig::source_rotation_search_deg did (empty when off).
   std::vector<SourceTurn> source_turns;

@@ -35,6 +35,7 @@ umvs::FusionConfig fusion_config_from_ros(const ros::NodeHandle& nh);
 inline umvs::DepthEstimatorConfig inference_estimator_defaults() {
   umvs::DepthEstimatorConfig c{640, 512, 0};
   c.completion.min_confidence = umvs::kRecommendedCompletionConfidence;
+  c.min_parallax_px = umvs::kRecommendedMinParallaxPx;
   // `auto`, as `umvs infer`. Since the trainer's train_args label and judge with one pass per source
   // too, the models its rule reloads beat what `auto` served (docs/results.md, twenty-sixth session).
   c.source_combination = umvs::kRecommendedSourceCombination;
