@@ -59,7 +59,7 @@ std::string random_model(const std::string& path) {
 const std::string kTrainFlags = " --width 96 --height 64 --num-depth 8 --views-loss 3 --top-k 2 --threads 1 --save-every 2";
 
 // ---------------------------------------------------------------------------------------------
-// umvs train: run folders and arguments (issue 11, items 5 and 6)
+// umvs train: run folders and arguments
 
 TEST(TrainRunFolder, ANonEmptyFolderIsOnlyReplacedWithOverwrite) {
   const std::string data = scene("rf_data");
@@ -205,7 +205,7 @@ TEST(CheckpointFaults, AFlippedByteFailsTheZipChecksum) {
 TEST(CheckpointFaults, CorruptWrongArchitectureOversizedAndSpecialFilesAreRefused) {
   const std::string dir = test::temp_dir("bad_ckpt");
   const std::string data = scene("bad_ckpt_data");
-  // Not a checkpoint at all (already refused before issue 11).
+  // Not a checkpoint at all.
   write_bytes(dir + "/garbage.pt", "this is not a checkpoint");
   Result garbage = run_umvs("infer --data " + data + " --checkpoint " + dir + "/garbage.pt --out " + dir + "/o1");
   EXPECT_EQ(garbage.status, 1);
@@ -590,7 +590,7 @@ TEST(ReaderFaults, CountsClaimedByHeadersAreBoundedByTheFileSize) {
 }
 
 // ---------------------------------------------------------------------------------------------
-// SIGKILL (already behaved before issue 11; kept so)
+// SIGKILL
 
 // Starts `umvs ARGS...` without a shell, output discarded.
 pid_t spawn_umvs(const std::vector<std::string>& args) {

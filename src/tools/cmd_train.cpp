@@ -330,8 +330,7 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
               "0 = leave them unlabelled (plain self-training)")
       .option("anchor-min-confidence", "0.5",
               "anchored self-training: anchor only the pixels the starting model gave at least this confidence "
-              "(the others are left to the photometric loss; 0 = every unconfirmed pixel, the default before "
-              "2026-12-03)")
+              "(the others are left to the photometric loss; 0 = every unconfirmed pixel)")
       .option("anchor-unseen", "0",
               "anchored self-training with a confidence floor: 1 = also anchor, whatever their confidence, the "
               "pixels that no loss view sees at the starting model's depth (the photometric loss cannot judge them)")

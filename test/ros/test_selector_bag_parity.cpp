@@ -1,4 +1,4 @@
-// rostest (issue 12, item 1): one bag, fed live through the keyframe_selector node and read
+// rostest: one bag, fed live through the keyframe_selector node and read
 // offline by read_bag_keyframes (what `umvs train --bag` and the trainer node use), gives the
 // same keyframes, in the same order, with the same intrinsics. The camera has distinct K and P
 // (and distortion), so reading the wrong one of them, or a different ~rectified, shows.

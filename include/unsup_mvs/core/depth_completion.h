@@ -19,8 +19,7 @@
 namespace umvs {
 
 // The floor below which `umvs infer` and the inference nodelet complete by default: chosen on
-// rendered scenes, then tested on others and on real images (docs/results.md, twenty-second and
-// twenty-third sessions). The core's own default (DepthCompletionConfig) stays off, so that training,
+// rendered scenes, then tested on others and on real images (docs/results.md). The core's own default (DepthCompletionConfig) stays off, so that training,
 // the reload judge and the parity checks see the network's own depth.
 inline constexpr double kRecommendedCompletionConfidence = 0.7;
 

@@ -31,8 +31,8 @@ struct ViewInput {
 //  kAuto: the variance pass; when it is unsure of most of the map (fewer than
 //    kAutoMinConfidentShare of its pixels at kAutoConfidentLevel or more), also the per-source
 //    passes of kMostConfident. Far-apart keyframes, whose sources disagree, get the extra passes;
-//    well-overlapping ones keep the one pass and its depth. Measured in docs/results.md
-//    (2026-12-04, twenty-fourth session): on the living room the variance pass is confident on
+//    well-overlapping ones keep the one pass and its depth. Measured in docs/results.md:
+//    on the living room the variance pass is confident on
 //    5-13 % of each map, on templeRing on 36-51 %, on rendered scenes on 69-98 %.
 enum class SourceCombination { kVariance, kMostConfident, kAuto };
 const char* to_string(SourceCombination c);

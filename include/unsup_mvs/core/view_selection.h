@@ -32,8 +32,7 @@ std::vector<Eigen::Vector3d> sample_frustum_points(const Camera& ref, double dep
 // The depth at which keyframes are scored when only the depth range [near, far] is known: its
 // geometric mean, the middle of the range on a log scale. The arithmetic middle lies far behind
 // most of a wide range (a street seen at 2.7-45 m: 24 m, where adjacent keyframes triangulate
-// under the score's 5 degrees), so it picked far-apart neighbours (docs/results.md, 2026-12-02,
-// ninth session).
+// under the score's 5 degrees), so it picked far-apart neighbours.
 // Throws std::invalid_argument unless 0 < near <= far (both finite).
 double view_selection_depth(double near, double far);
 

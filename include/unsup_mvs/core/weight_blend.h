@@ -2,8 +2,7 @@
 // (WiSE-FT: Wortsman et al., "Robust fine-tuning of zero-shot models", CVPR 2022). A short
 // label-free adaptation often moves the weights too far for the depth it improves, and its
 // label-free judge cannot always tell (docs/results.md, the reload rule's audits). On rendered
-// scenes the midpoint of the two models undid most of that damage, not all of it (same file,
-// 2026-12-02, eleventh session).
+// scenes the midpoint of the two models undid most of that damage, not all of it (same file).
 #pragma once
 
 #include "unsup_mvs/core/mvsnet.h"

@@ -37,8 +37,7 @@ struct FineTuneConfig {
   int local_ranks = 1;  // each training job as this many data-parallel ranks on this machine (--nproc)
   // The model a job judges and may serve: this share of the fine-tuned weights plus the rest of
   // the model it started from (`umvs train --fine-tuned-share`, core/weight_blend.h); 1 = the
-  // fine-tuned weights as trained (default). Measured in docs/results.md (2026-12-02, eleventh
-  // session): 0.5 undid most of what adaptation broke on rendered scenes, not all of it.
+  // fine-tuned weights as trained (default). Measured in docs/results.md: 0.5 undid most of what adaptation broke on rendered scenes, not all of it.
   double fine_tuned_share = 1.0;
   KeyframeStreamConfig keyframes;       // how `umvs train` reads the bags (as the keyframe_selector)
 
@@ -66,8 +65,8 @@ bool read_eval_scores(const std::string& eval_csv, EvalScores* scores);
 // worse, at a photometric loss only 0.07 % lower (docs/results.md).
 constexpr double kMinPhotometricGain = 0.01;
 // Nor is a share of confirmed depth higher by less than this share of the held-out pixels (one
-// percentage point; so a model with under 1 % confirmed is never served): fine-tuning the
-// 2026-11-30 default model on the trainer test's rendered bag raised it from 11.8 % to 12.5 % while
+// percentage point; so a model with under 1 % confirmed is never served): fine-tuning an
+// earlier default model on the trainer test's rendered bag raised it from 11.8 % to 12.5 % while
 // the depth error rose 5 % (docs/results.md).
 constexpr double kMinConsistentGain = 0.01;
 

@@ -54,7 +54,7 @@ struct TrainingRunConfig {
   // check and keeps the rest where it was. Only read with self_training_every > 0. On by default:
   // judged on a second pass through rendered scenes, the reload rule served no anchored model
   // worse on two of three depth scores (24 runs), and 4 of the 21 plain ones it served were worse
-  // on all three (docs/results.md, 2026-12-03).
+  // on all three (docs/results.md).
   bool anchor_unconfirmed = true;
   // Anchor only the pixels the start model gave at least this confidence (0 = all): an unconfident
   // guess is no depth worth keeping, and where views rarely overlap nearly every pixel is one.

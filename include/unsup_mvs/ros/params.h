@@ -37,7 +37,7 @@ inline umvs::DepthEstimatorConfig inference_estimator_defaults() {
   c.completion.min_confidence = umvs::kRecommendedCompletionConfidence;
   c.min_parallax_px = umvs::kRecommendedMinParallaxPx;
   // `auto`, as `umvs infer`. Since the trainer's train_args label and judge with one pass per source
-  // too, the models its rule reloads beat what `auto` served (docs/results.md, twenty-sixth session).
+  // too, the models its rule reloads beat what `auto` served (docs/results.md).
   c.source_combination = umvs::kRecommendedSourceCombination;
   return c;
 }
