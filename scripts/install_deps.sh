@@ -38,6 +38,8 @@ PACKAGES=(
   python3-numpy  # test/ros/test_ros_tools.py
   # the `nodelet` executable (manager / load) that launch/pipeline.launch runs
   libnodeletlib-tools
+  # depth_image_proc's nodelets: the rostest hands our depth camera (REP 118) to point_cloud_xyz
+  libdepth-image-proc-dev
 )
 if [[ "${1:-}" == "--viz" ]]; then
   PACKAGES+=(rviz xvfb netpbm)  # netpbm: Xvfb framebuffer (XWD) -> PNG

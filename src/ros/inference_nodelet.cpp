@@ -62,6 +62,7 @@ unsup_mvs::InferenceConfig to_reconfigure(const InferenceNodeConfig& c) {
   r.max_height = c.estimator.max_height;
   r.num_depth = c.estimator.num_depth;
   r.pose_refinement_deg = c.pose_refinement_deg;
+  r.depth_camera_min_confidence = c.depth_camera_min_confidence;
   return r;
 }
 
@@ -70,6 +71,7 @@ InferenceNodeConfig with_reconfigure(InferenceNodeConfig c, const unsup_mvs::Inf
   c.estimator.max_height = r.max_height;
   c.estimator.num_depth = r.num_depth;
   c.pose_refinement_deg = r.pose_refinement_deg;
+  c.depth_camera_min_confidence = r.depth_camera_min_confidence;
   return c;
 }
 
@@ -125,6 +127,7 @@ class InferenceNodelet : public nodelet::Nodelet {
       rectified_ = c.rectified;
       checkpoint_ = c.checkpoint;
       max_image_pixels_ = c.max_image_pixels;
+      depth_camera_min_confidence_ = c.depth_camera_min_confidence;
       max_views_ = c.max_views;
       max_planes_ = c.max_planes;
       max_checkpoint_bytes_ = static_cast<uint64_t>(c.max_checkpoint_mb) << 20;
@@ -154,6 +157,10 @@ class InferenceNodelet : public nodelet::Nodelet {
       estimate_pub_ = nh.advertise<unsup_mvs::DepthEstimate>("depth_estimate", 2, connect, connect);
       depth_pub_ = it_->advertise("depth", 2, it_connect, it_connect);
       confidence_pub_ = it_->advertise("confidence", 2, it_connect, it_connect);
+      // The depth map as a standard depth camera (REP 118) with the reference's colour beside it:
+      // what depth_image_proc, rtabmap and other ROS consumers take.
+      depth_camera_pub_ = it_->advertiseCamera("depth/image", 2, it_connect, it_connect, connect, connect);
+      depth_rgb_pub_ = it_->advertise("depth/rgb", 2, it_connect, it_connect);
     }
     diagnostics_pub_ = nh.advertise<diagnostic_msgs::DiagnosticArray>("/diagnostics", 5);
     // reload_model has its own queue and thread: a slow or stuck load never holds up the keyframe
@@ -181,6 +188,7 @@ class InferenceNodelet : public nodelet::Nodelet {
     // A new search limit starts afresh: pairs measured with the old one are measured again.
     if (next.pose_refinement_deg != node_.pose_refinement_deg) pose_refiner_ = make_pose_refiner(next);
     config_ = next.estimator;
+    depth_camera_min_confidence_ = next.depth_camera_min_confidence;
     node_ = next;
   }
 
@@ -188,7 +196,8 @@ class InferenceNodelet : public nodelet::Nodelet {
   void updateSubscription() {
     std::lock_guard<std::mutex> lock(connect_mutex_);
     const bool wanted = estimate_pub_.getNumSubscribers() > 0 || depth_pub_.getNumSubscribers() > 0 ||
-                        confidence_pub_.getNumSubscribers() > 0;
+                        confidence_pub_.getNumSubscribers() > 0 || depth_camera_pub_.getNumSubscribers() > 0 ||
+                        depth_rgb_pub_.getNumSubscribers() > 0;
     if (wanted && !keyframes_sub_) {
       keyframes_sub_ = getNodeHandle().subscribe("keyframes", static_cast<uint32_t>(pending_->capacity()),
                                                &InferenceNodelet::onKeyframes, this);
@@ -274,6 +283,11 @@ class InferenceNodelet : public nodelet::Nodelet {
     estimate_pub_.publish(out);
     if (depth_pub_.getNumSubscribers() > 0) depth_pub_.publish(out.depth);
     if (confidence_pub_.getNumSubscribers() > 0) confidence_pub_.publish(out.confidence);
+    if (depth_camera_pub_.getNumSubscribers() > 0) {
+      depth_camera_pub_.publish(umvs::depth_camera_image_msg(map.depth, map.confidence, depth_camera_min_confidence_, header),
+                                out.camera_info);
+    }
+    if (depth_rgb_pub_.getNumSubscribers() > 0) depth_rgb_pub_.publish(out.image);
 
     const double total = (ros::WallTime::now() - t0).toSec();
     const double latency = (ros::Time::now() - header.stamp).toSec();
@@ -471,6 +485,7 @@ class InferenceNodelet : public nodelet::Nodelet {
   torch::Device device_{torch::kCPU};
   int threads_ = 0;
   bool rectified_ = false;
+  std::atomic<double> depth_camera_min_confidence_{0.5};  // set by reconfigure, read by the worker
   InferenceNodeConfig node_;        // as started, then as reconfigured (changed only by onReconfigure)
   umvs::DepthEstimatorConfig config_;  // node_.estimator, read by reloads (under model_mutex_)
   std::string checkpoint_;
@@ -496,7 +511,8 @@ class InferenceNodelet : public nodelet::Nodelet {
   std::mutex connect_mutex_;
   std::unique_ptr<image_transport::ImageTransport> it_;
   ros::Publisher estimate_pub_, diagnostics_pub_;
-  image_transport::Publisher depth_pub_, confidence_pub_;
+  image_transport::Publisher depth_pub_, confidence_pub_, depth_rgb_pub_;
+  image_transport::CameraPublisher depth_camera_pub_;
   ros::Subscriber keyframes_sub_;
   ros::ServiceServer reload_srv_;
   std::unique_ptr<ReconfigureServer<unsup_mvs::InferenceConfig>> reconfigure_;

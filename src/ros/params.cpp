@@ -66,6 +66,10 @@ void InferenceNodeConfig::validate() const {
     throw std::invalid_argument("complete_below_confidence must be a confidence in [0,1) (0 = off), got " +
                                 std::to_string(completion));
   }
+  if (!(depth_camera_min_confidence >= 0.0 && depth_camera_min_confidence <= 1.0)) {
+    throw std::invalid_argument("depth_camera_min_confidence must be a confidence in [0,1], got " +
+                                std::to_string(depth_camera_min_confidence));
+  }
   estimator.validate();
   // The network input is cropped to multiples of 32: a smaller bound leaves no image.
   for (const auto& [name, size] : {std::pair<const char*, int>{"max_width", estimator.max_width},
@@ -115,6 +119,7 @@ InferenceNodeConfig inference_node_config_from_ros(const ros::NodeHandle& nh) {
   nh.param("queue_size", c.queue_size, c.queue_size);
   nh.param("pose_refinement_deg", c.pose_refinement_deg, c.pose_refinement_deg);
   nh.param("pose_refinement_keyframes", c.pose_refinement_keyframes, c.pose_refinement_keyframes);
+  nh.param("depth_camera_min_confidence", c.depth_camera_min_confidence, c.depth_camera_min_confidence);
   c.validate();
   return c;
 }

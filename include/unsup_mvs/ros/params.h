@@ -60,6 +60,8 @@ struct InferenceNodeConfig {
   // in degrees); 0 = off. The refiner remembers pose_refinement_keyframes keyframes.
   double pose_refinement_deg = 0.0;
   int pose_refinement_keyframes = 100;
+  // depth/image (REP 118): pixels below this confidence are NaN, as are those without an estimate.
+  double depth_camera_min_confidence = 0.5;
   void validate() const;
 };
 InferenceNodeConfig inference_node_config_from_ros(const ros::NodeHandle& nh);

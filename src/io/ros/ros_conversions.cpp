@@ -142,6 +142,16 @@ sensor_msgs::Image float_to_image_msg(const torch::Tensor& values, const std_msg
   return m;
 }
 
+sensor_msgs::Image depth_camera_image_msg(const torch::Tensor& depth, const torch::Tensor& confidence,
+                                          double min_confidence, const std_msgs::Header& header) {
+  if (!depth.defined() || !confidence.defined() || depth.sizes() != confidence.sizes()) {
+    throw std::invalid_argument("depth_camera_image_msg: depth and confidence must be [H,W] of one size");
+  }
+  const auto d = depth.to(torch::kCPU, torch::kFloat32);
+  const auto known = (d > 0) & torch::isfinite(d) & (confidence.to(torch::kCPU, torch::kFloat32) >= min_confidence);
+  return float_to_image_msg(d.where(known, torch::full({}, std::numeric_limits<float>::quiet_NaN())), header);
+}
+
 torch::Tensor image_msg_to_float(const sensor_msgs::Image& msg) {
   if (msg.encoding != enc::TYPE_32FC1) {
     throw std::invalid_argument("expected a 32FC1 image, got '" + msg.encoding + "'");

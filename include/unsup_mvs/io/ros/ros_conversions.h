@@ -37,6 +37,11 @@ sensor_msgs::Image compressed_to_image_msg(const sensor_msgs::CompressedImage& m
 sensor_msgs::Image rgb8_to_image_msg(const torch::Tensor& rgb8, const std_msgs::Header& header);
 // float32 [H,W] -> 32FC1 image (depth in metres, REP 118).
 sensor_msgs::Image float_to_image_msg(const torch::Tensor& values, const std_msgs::Header& header);
+// The depth map as a standard depth camera image (REP 118): 32FC1 metres, NaN where there is no
+// estimate (depth <= 0 or not finite) or the confidence is below min_confidence, so that
+// depth_image_proc and other consumers drop those pixels. depth, confidence: float32 [H,W].
+sensor_msgs::Image depth_camera_image_msg(const torch::Tensor& depth, const torch::Tensor& confidence,
+                                          double min_confidence, const std_msgs::Header& header);
 // 32FC1 image -> float32 [H,W]. Throws std::invalid_argument for another encoding.
 torch::Tensor image_msg_to_float(const sensor_msgs::Image& msg);
 
