@@ -10,6 +10,7 @@
 #include "test_util.h"
 #include "unsup_mvs/core/fusion.h"
 #include "unsup_mvs/io/array_io.h"
+#include "unsup_mvs/io/atomic_file.h"
 #include "unsup_mvs/io/image_io.h"
 #include "unsup_mvs/io/import.h"
 #include "unsup_mvs/io/mvs_folder.h"
@@ -466,6 +467,16 @@ TEST(ImportRgbd, SourcesAtTheWantedBaselineRankFirst) {
   const auto cam = MvsFolder(cfg.out_dir).load_view(3).cam;
   EXPECT_DOUBLE_EQ(cam.depth_min, 0.5);
   EXPECT_DOUBLE_EQ(cam.depth_max, 8.0);
+  // ... and with it the sensor's depth reaches depth_gt/ alone: other depth images, the same folder
+  // otherwise (a folder a model may train on without labels).
+  for (int i = 1; i <= 8; ++i) {
+    write_png_u16(root + "/depth/" + std::to_string(i) + ".png", torch::full({24, 32}, 2500 * i, torch::kInt32));
+  }
+  cfg.out_dir = root + "/out_range_other_depth";
+  import_rgbd(cfg);
+  EXPECT_EQ(read_file_bytes(root + "/out_range/pair.txt"), read_file_bytes(cfg.out_dir + "/pair.txt"));
+  EXPECT_EQ(read_file_bytes(root + "/out_range/cams/00000003_cam.txt"), read_file_bytes(cfg.out_dir + "/cams/00000003_cam.txt"));
+  EXPECT_NE(read_file_bytes(root + "/out_range/depth_gt/00000003.pfm"), read_file_bytes(cfg.out_dir + "/depth_gt/00000003.pfm"));
 }
 
 TEST(ImportRealData, TempleRing) {
@@ -512,6 +523,60 @@ TEST(ImportRealData, LivingRoomDepthIsConsistentAcrossViews) {
   auto check = check_consistency(d3, d3 > 0, c3, d1, d1 > 0, c1, fc);
   const double agree = check.agree.to(torch::kFloat64).mean().item<double>();
   EXPECT_GT(agree, 0.2) << "share of view 3 confirmed by view 1";
+}
+
+// Two views of an imported real RGB-D set: the share of view a's sensor depth that view b's
+// confirms (fusion's round trip at 2 px and 3 %). A wrong pose convention, an uninverted pose, a
+// wrong depth scale or the wrong frame association make almost nothing agree.
+double sensor_depth_agreement(const std::string& folder, int a, int b) {
+  MvsFolder f(folder);
+  const auto da = read_pfm(f.depth_gt_path(a)), db = read_pfm(f.depth_gt_path(b));
+  FusionConfig fc;
+  fc.max_relative_depth = 0.03;
+  fc.max_reprojection_px = 2.0;
+  const auto check = check_consistency(da, da > 0, f.load_view(a).cam.camera, db, db > 0, f.load_view(b).cam.camera, fc);
+  return check.agree.to(torch::kFloat64).sum().item<double>() / (da > 0).sum().item<double>();
+}
+
+TEST(ImportRealData, HoloLensKitchen) {
+  UMVS_REQUIRE_SHARED("hololens_kitchen", data);
+  RgbdImportConfig cfg;
+  cfg.layout = RgbdLayout::kDvmvs;
+  cfg.data_dir = data + "/raw/hololens-dataset/000";
+  cfg.out_dir = test::temp_dir("import_hololens");
+  cfg.count = 4;
+  EXPECT_EQ(import_rgbd(cfg).views, 4);
+  const auto view = MvsFolder(cfg.out_dir).load_view(3);  // image 00003 is row 0 of poses.txt
+  EXPECT_NEAR(view.cam.camera.K(0, 0), 495.568, 1e-3);
+  EXPECT_GT(sensor_depth_agreement(cfg.out_dir, 3, 6), 0.5);
+}
+
+TEST(ImportRealData, TumCabinetKeyframes) {
+  UMVS_REQUIRE_SHARED("tum_fr3_cabinet_kf", data);
+  RgbdImportConfig cfg;
+  cfg.layout = RgbdLayout::kTum;
+  cfg.data_dir = data + "/raw/data";
+  cfg.out_dir = test::temp_dir("import_tum_cabinet");
+  cfg.tum_pose_file = "truth_cam_poses.txt";
+  cfg.tum_association = "index";  // the lists are numbered 0..57, the poses carry the camera's times
+  cfg.intrinsics = read_intrinsics_file(cfg.data_dir + "/TUM3.yaml");
+  cfg.first = 2;
+  cfg.count = 3;
+  EXPECT_EQ(import_rgbd(cfg).views, 3);
+  EXPECT_GT(sensor_depth_agreement(cfg.out_dir, 3, 4), 0.5);  // a pair PROVENANCE lists as clean
+}
+
+TEST(ImportRealData, SevenScenesRedKitchen) {
+  UMVS_REQUIRE_SHARED("sevenscenes_redkitchen", data);
+  RgbdImportConfig cfg;
+  cfg.layout = RgbdLayout::kSevenScenes;
+  cfg.data_dir = data + "/raw/data";
+  cfg.out_dir = test::temp_dir("import_7scenes_real");
+  cfg.count = 4;
+  EXPECT_EQ(import_rgbd(cfg).views, 4);  // poses with R^T R - I up to 1e-4 are repaired, not refused
+  const auto view = MvsFolder(cfg.out_dir).load_view(12);
+  EXPECT_LT(orthonormality_error(view.cam.camera.R()), 1e-9);
+  EXPECT_GT(sensor_depth_agreement(cfg.out_dir, 0, 12), 0.5);
 }
 
 }  // namespace

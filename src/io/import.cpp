@@ -652,13 +652,19 @@ ImportSummary import_rgbd(const RgbdImportConfig& config) {
     }
     summary.depth_min = std::min(summary.depth_min, iv.cam.depth_min);
     summary.depth_max = std::max(summary.depth_max, iv.cam.depth_max);
-    // Surface samples for the view-selection score: a 32x24 grid of the sensor depth.
+    // Surface samples for the view-selection score: with a fixed range nothing but depth_gt/ may
+    // come from the sensor, so the frustum at the range's middle stands in for the surface (as the
+    // keyframe selector does); else a 32x24 grid of the sensor depth.
     std::vector<Eigen::Vector3d> pts;
-    auto d = depth.accessor<float, 2>();
-    for (int gy = 0; gy < 24; ++gy) {
-      for (int gx = 0; gx < 32; ++gx) {
-        const int y = (2 * gy + 1) * cam.height / 48, x = (2 * gx + 1) * cam.width / 64;
-        if (d[y][x] > 0) pts.push_back(cam.backproject(x, y, d[y][x]));
+    if (fixed_range) {
+      pts = sample_frustum_points(cam, view_selection_depth(config.depth_near, config.depth_far));
+    } else {
+      auto d = depth.accessor<float, 2>();
+      for (int gy = 0; gy < 24; ++gy) {
+        for (int gx = 0; gx < 32; ++gx) {
+          const int y = (2 * gy + 1) * cam.height / 48, x = (2 * gx + 1) * cam.width / 64;
+          if (d[y][x] > 0) pts.push_back(cam.backproject(x, y, d[y][x]));
+        }
       }
     }
     write_pfm(config.out_dir + "/depth_gt/" + stem + ".pfm", depth);

@@ -68,8 +68,10 @@ struct RgbdImportConfig {
   double tum_max_dt = 0.02;
   // Which frames (in the layout's order): from `first`, every `every`-th, at most `count` (0 = all).
   int first = 0, every = 1, count = 0;
-  // A fixed depth range for every view (what a robot configures). 0 = each view's own range from
-  // its sensor depth (min..max), for scoring runs.
+  // A fixed depth range for every view (what a robot configures): then nothing but depth_gt/
+  // comes from the sensor, and sources are ranked on the frustum at the range's middle, so the
+  // folder can train a model without labels. 0 = each view's own range from its sensor depth
+  // (min..max) and sources ranked on the sensor's surface, for scoring runs.
   double depth_near = 0.0, depth_far = 0.0;
   double depth_margin = 0.1;  // the range widened by this fraction of its length each side
   int depth_num = 192;
