@@ -36,7 +36,16 @@ import_set() {  # name out
   esac
 }
 
-json_get() { /usr/bin/python3 -c "import json,sys; d=json.load(open(sys.argv[1])); print(eval(sys.argv[2]))" "$@"; }
+# A figure of a JSON file; nan where it has none (no pixel at a confidence floor).
+json_get() {
+  /usr/bin/python3 -c "
+import json, sys
+d = json.load(open(sys.argv[1]))
+try:
+    print(eval(sys.argv[2]))
+except TypeError:
+    print('nan')" "$@"
+}
 
 printf '%-12s %8s %8s %9s %9s %8s %8s %8s %9s\n' set "abs rel" AUSE "conf>=.5" "within10" "F@5cm" precision recall points
 for set in $SETS; do
@@ -47,11 +56,16 @@ for set in $SETS; do
   "$UMVS" infer --data "$dir/data" --checkpoint "$CHECKPOINT" --out "$dir/est" --threads "$THREADS" ${INFER_ARGS:-} \
     >"$dir/infer.txt" 2>&1 || { echo "real_indoor: umvs infer failed on $set (see $dir/infer.txt)" >&2; exit 1; }
   # shellcheck disable=SC2086
+  rm -f "$dir/cloud.ply"
   "$UMVS" fuse --depth "$dir/est" --out "$dir/cloud.ply" ${FUSE_ARGS:-} >"$dir/fuse.txt" 2>&1 \
+    || grep -q "no point survived" "$dir/fuse.txt" \
     || { echo "real_indoor: umvs fuse failed on $set (see $dir/fuse.txt)" >&2; exit 1; }
   "$UMVS" eval depth --est "$dir/est" --gt "$dir/data" --rel-thresholds 0.1 --sparsification --json >"$dir/depth.json"
-  "$UMVS" eval cloud --est "$dir/cloud.ply" --gt-depth "$dir/data" --thresholds 0.05 --json >"$dir/cloud.json" 2>"$dir/cloud.err" \
-    || echo '{"fscore":[0],"precision":[0],"recall":[0],"est_points":0}' >"$dir/cloud.json"
+  if [[ -f "$dir/cloud.ply" ]]; then
+    "$UMVS" eval cloud --est "$dir/cloud.ply" --gt-depth "$dir/data" --thresholds 0.05 --json >"$dir/cloud.json"
+  else  # an empty cloud: nothing to score
+    echo '{"fscore":[0],"precision":[0],"recall":[0],"est_points":0}' >"$dir/cloud.json"
+  fi
   d="$dir/depth.json" c="$dir/cloud.json"
   printf '%-12s %8.3f %8.3f %8.1f%% %8.1f%% %8.3f %8.3f %8.3f %9d\n' "$set" \
     "$(json_get "$d" "d['overall']['abs_rel']")" "$(json_get "$d" "d['sparsification']['ause']")" \
