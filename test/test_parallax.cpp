@@ -48,7 +48,7 @@ TEST(Parallax, TheEstimatorSettingIsValidated) {
   DepthEstimatorConfig config;
   config.min_parallax_px = -1.0;
   EXPECT_THROW(config.validate(), std::invalid_argument);
-  config.min_parallax_px = kRecommendedMinParallaxPx;
+  config.min_parallax_px = 1.0;
   EXPECT_NO_THROW(config.validate());
 }
 

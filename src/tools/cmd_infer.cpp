@@ -73,7 +73,7 @@ UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
               "(edge-aware, a wall is filled as a plane; dense depth maps where the network has no evidence: plain walls, "
               "parts no source sees; measured in docs/results.md; the confidence maps stay as the network gave them; "
               "0 = off: the network's own depth)")
-      .option("min-parallax-px", umvs::kRecommendedMinParallaxPx,
+      .option("min-parallax-px", umvs::DepthEstimatorConfig{}.min_parallax_px,
               "confidence 0 (unknown) where a 10 % change of depth moves the pixel by less than this many pixels in "
               "every source: too little parallax to tell depth (a camera turning in place, a short baseline); 0 = off")
       .option("num-depth", "0", "depth planes (multiple of 8; 0 = 128 at 640 wide, scaled with the width)")

@@ -66,7 +66,9 @@ struct DepthEstimatorConfig {
   // many pixels (of the network input) in every source when its depth changes by
   // kParallaxDepthChange gets confidence 0. A camera turning in place, or a baseline too short
   // for the depth, gives the cost volume nothing to match, and the network's guess there can be
-  // confidently wrong. 0 = off. Applied before completion, which then fills such pixels.
+  // confidently wrong. 0 = off (the default everywhere: at 1 px the confident pixels left on short
+  // real clips were still mostly wrong; docs/results.md). Applied before completion, which then
+  // fills such pixels.
   double min_parallax_px = 0.0;
 
   void validate() const;  // throws std::invalid_argument naming the field
@@ -74,8 +76,6 @@ struct DepthEstimatorConfig {
 
 // The relative depth change by which min_parallax_px is judged.
 constexpr double kParallaxDepthChange = 0.1;
-// What `umvs infer` and the inference nodelet use for min_parallax_px.
-constexpr double kRecommendedMinParallaxPx = 1.0;
 
 // Per pixel of a depth map, the largest shift over the sources (in pixels of each source camera)
 // of the pixel's projection when its depth d becomes d * (1 + relative_change).
