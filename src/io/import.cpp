@@ -97,6 +97,28 @@ void set_depth_range(MvsCam& cam, double zmin, double zmax, double margin, int d
   cam.depth_interval = (cam.depth_max - cam.depth_min) / (depth_num - 1);
 }
 
+// What every importer refuses before reading anything.
+void check_import_folders(const std::string& data_dir, const std::string& out_dir, int depth_num, int num_sources) {
+  if (!fs::is_directory(data_dir)) throw std::runtime_error("data folder '" + data_dir + "' does not exist");
+  if (fs::exists(out_dir) && fs::equivalent(data_dir, out_dir)) {
+    throw std::runtime_error("the output folder must differ from the data folder");
+  }
+  if (depth_num < 2 || num_sources < 1) throw std::runtime_error("depth_num must be >= 2 and num_sources >= 1");
+}
+
+// The whitespace-separated numbers of a text; names `where` and the token that is not one.
+std::vector<double> numbers_in(const std::string& text, const std::string& where) {
+  std::vector<double> v;
+  std::istringstream ss(text);
+  for (std::string tok; ss >> tok;) {
+    char* end = nullptr;
+    const double x = std::strtod(tok.c_str(), &end);
+    if (end == tok.c_str() || *end != '\0') throw std::runtime_error(where + ": '" + tok + "' is not a number");
+    v.push_back(x);
+  }
+  return v;
+}
+
 // The depth image of a colour frame: the same stem in depth/, whatever the format (RGB-D
 // sequences pair colour JPEGs or PNGs with 16-bit PNG or PGM depth).
 std::string depth_image_for(const std::string& depth_dir, const std::string& color_path) {
@@ -122,11 +144,7 @@ bool parse_middlebury_bbox(const std::string& text, Eigen::Vector3d* min, Eigen:
 }
 
 ImportSummary import_middlebury(const MiddleburyImportConfig& config) {
-  if (!fs::is_directory(config.data_dir)) throw std::runtime_error("data folder '" + config.data_dir + "' does not exist");
-  if (fs::exists(config.out_dir) && fs::equivalent(config.data_dir, config.out_dir)) {
-    throw std::runtime_error("the output folder must differ from the data folder");
-  }
-  if (config.depth_num < 2 || config.num_sources < 1) throw std::runtime_error("depth_num must be >= 2 and num_sources >= 1");
+  check_import_folders(config.data_dir, config.out_dir, config.depth_num, config.num_sources);
   std::string par = config.par_file;
   if (par.empty()) {
     for (const auto& e : fs::directory_iterator(config.data_dir)) {
@@ -258,14 +276,7 @@ CameraIntrinsics read_intrinsics_file(const std::string& path) {
     set_pinhole(keys["fx"], keys["fy"], keys["cx"], keys["cy"]);
     for (const char* k : {"k1", "k2", "p1", "p2", "k3"}) in.distortion.push_back(keys.count(k) ? keys[k] : 0.0);
   } else {
-    std::vector<double> v;
-    std::istringstream ss(text);
-    for (std::string tok; ss >> tok;) {
-      char* end = nullptr;
-      const double x = std::strtod(tok.c_str(), &end);
-      if (end == tok.c_str() || *end != '\0') throw std::runtime_error(path + ": '" + tok + "' is not a number");
-      v.push_back(x);
-    }
+    const std::vector<double> v = numbers_in(text, path);
     // Nine numbers are a 3x3 matrix when they look like one (bottom row 0 0 1), else
     // "fx fy cx cy k1 k2 p1 p2 k3".
     const bool matrix = v.size() == 9 && v[3] == 0.0 && v[6] == 0.0 && v[7] == 0.0 && v[8] == 1.0;
@@ -328,18 +339,6 @@ Eigen::Matrix4d pose_from_matrix(const std::vector<double>& v, const std::string
   T.topLeftCorner<3, 3>() = nearest_rotation(R);
   T.row(3) << 0, 0, 0, 1;
   return T;
-}
-
-std::vector<double> numbers_in(const std::string& text, const std::string& where) {
-  std::vector<double> v;
-  std::istringstream ss(text);
-  for (std::string tok; ss >> tok;) {
-    char* end = nullptr;
-    const double x = std::strtod(tok.c_str(), &end);
-    if (end == tok.c_str() || *end != '\0') throw std::runtime_error(where + ": '" + tok + "' is not a number");
-    v.push_back(x);
-  }
-  return v;
 }
 
 std::vector<RgbdFrame> slambook_frames(const RgbdImportConfig& config) {
@@ -587,11 +586,7 @@ std::vector<RgbdFrame> list_rgbd_frames(const RgbdImportConfig& config) {
 }
 
 ImportSummary import_rgbd(const RgbdImportConfig& config) {
-  if (!fs::is_directory(config.data_dir)) throw std::runtime_error("data folder '" + config.data_dir + "' does not exist");
-  if (fs::exists(config.out_dir) && fs::equivalent(config.data_dir, config.out_dir)) {
-    throw std::runtime_error("the output folder must differ from the data folder");
-  }
-  if (config.depth_num < 2 || config.num_sources < 1) throw std::runtime_error("depth_num must be >= 2 and num_sources >= 1");
+  check_import_folders(config.data_dir, config.out_dir, config.depth_num, config.num_sources);
   if (config.depth_scale < 0 || !std::isfinite(config.depth_scale)) throw std::runtime_error("depth scale must be > 0");
   const bool fixed_range = config.depth_near > 0 || config.depth_far > 0;
   if (fixed_range && !(config.depth_near > 0 && config.depth_far > config.depth_near && std::isfinite(config.depth_far))) {
