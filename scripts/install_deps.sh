@@ -19,6 +19,7 @@ PACKAGES=(
   python3-catkin-pkg python3-genmsg python3-gencpp python3-genpy python3-empy
   ros-std-msgs libstd-msgs-dev ros-sensor-msgs libsensor-msgs-dev
   ros-geometry-msgs libgeometry-msgs-dev ros-diagnostic-msgs libdiagnostic-msgs-dev
+  ros-nav-msgs libnav-msgs-dev python3-nav-msgs
   ros-std-srvs libstd-srvs-dev ros-tf2-msgs libtf2-msgs-dev ros-rosgraph-msgs
   # ROS 1 libraries the nodes use
   libroscpp-dev libnodeletlib-dev libnodelet-dev pluginlib-dev
@@ -38,6 +39,8 @@ PACKAGES=(
   python3-numpy  # test/ros/test_ros_tools.py
   # the `nodelet` executable (manager / load) that launch/pipeline.launch runs
   libnodeletlib-tools
+  # occupancy maps (OctoMap) and its command-line tools
+  liboctomap-dev octomap-tools
   # depth_image_proc's nodelets: the rostest hands our depth camera (REP 118) to point_cloud_xyz
   libdepth-image-proc-dev
 )

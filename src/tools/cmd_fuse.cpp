@@ -18,6 +18,7 @@
 #include "unsup_mvs/io/image_io.h"
 #include "unsup_mvs/io/inference_folder.h"
 #include "unsup_mvs/io/mvs_folder.h"
+#include "unsup_mvs/io/occupancy_map.h"
 #include "unsup_mvs/tools/args.h"
 #include "unsup_mvs/tools/command.h"
 
@@ -106,7 +107,10 @@ UMVS_COMMAND(fuse, "fuse depth maps into one consistent point cloud (PLY or PCD)
                   "when the depth maps are smaller than the images).");
   args.required("depth", "depth folder: `umvs infer` output or a folder of XXXXXXXX.pfm")
       .option("data", "", "MVSNet-format folder for cams/images/pair.txt missing from --depth")
-      .required("out", "output cloud, .ply or .pcd (written atomically; an existing file is kept when fusion fails)")
+      .required("out", "output cloud, .ply or .pcd (written atomically; an existing file is kept when fusion fails); "
+                       "or an occupancy map, .bt (OctoMap: confident pixels ray-cast from their cameras)")
+      .option("octomap-resolution", umvs::OccupancyMapConfig{}.resolution, ".bt: leaf edge (metres)")
+      .option("octomap-max-range", umvs::OccupancyMapConfig{}.max_range, ".bt: rays cut at this range (metres)")
       .option("min-confidence", fusion_defaults.min_confidence, "pixels below this confidence are ignored")
       .option("max-reprojection", fusion_defaults.max_reprojection_px,
               "max reprojection error after the round trip (pixels)")
@@ -147,7 +151,13 @@ UMVS_COMMAND(fuse, "fuse depth maps into one consistent point cloud (PLY or PCD)
   filters.radius_min_neighbors = args.integer("radius-min");
   filters.voxel_leaf = args.real("voxel-grid");
   filters.validate();
-  umvs::cloud_file_format(args.str("out"));  // a wrong extension is refused before any work
+  const bool occupancy = fs::path(args.str("out")).extension() == ".bt";
+  umvs::OccupancyMapConfig occupancy_cfg;
+  occupancy_cfg.resolution = args.real("octomap-resolution");
+  occupancy_cfg.max_range = args.real("octomap-max-range");
+  occupancy_cfg.min_confidence = cfg.min_confidence;
+  if (occupancy) occupancy_cfg.validate();
+  else umvs::cloud_file_format(args.str("out"));  // a wrong extension is refused before any work
   const auto bbox = args.given("bbox") ? parse_bbox(args.str("bbox")) : std::vector<double>{};
 
   const Layout layout = find_layout(args.str("depth"), args.str("data"));
@@ -182,6 +192,18 @@ UMVS_COMMAND(fuse, "fuse depth maps into one consistent point cloud (PLY or PCD)
   std::cerr << "loaded " << views.size() << " depth maps (" << views[0].depth.size(1) << "x" << views[0].depth.size(0) << ") from "
             << layout.depth_dir << " in " << load_s << " s; device " << device << ", " << torch::get_num_threads() << " threads\n";
 
+  if (occupancy) {  // an OctoMap: every confident pixel a ray from its camera, no consistency test
+    const auto t = std::chrono::steady_clock::now();
+    umvs::OccupancyMap map(occupancy_cfg);
+    int64_t rays = 0;
+    for (const auto& v : views) rays += map.integrate(v.depth, v.confidence, v.camera);
+    map.save(args.str("out"));
+    std::printf("occupancy map of %zu views (%lld rays, %.3g m leaves) in %.2f s: %zu occupied, %zu free leaves; wrote %s\n",
+                views.size(), static_cast<long long>(rays), occupancy_cfg.resolution,
+                std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count(), map.occupied_leaves(),
+                map.free_leaves(), args.str("out").c_str());
+    return 0;
+  }
   const auto t0 = std::chrono::steady_clock::now();
   umvs::PointCloud cloud;
   if (args.on("stream")) {
