@@ -5,12 +5,14 @@
 // The thresholds can be tuned live (dynamic_reconfigure, cfg/Fusion.cfg). See docs/ros.md.
 #include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
+#include <nav_msgs/OccupancyGrid.h>
 #include <ros/ros.h>
 #include <pcl_conversions/pcl_conversions.h>
 #include <sensor_msgs/PointCloud2.h>
 #include <torch/torch.h>
 
 #include <boost/make_shared.hpp>
+#include <filesystem>
 #include <mutex>
 
 #include "unsup_mvs/DepthEstimate.h"
@@ -23,6 +25,7 @@
 #include "unsup_mvs/io/cloud_file.h"
 #include "unsup_mvs/io/cloud_filter.h"
 #include "unsup_mvs/io/file_safety.h"
+#include "unsup_mvs/io/occupancy_map.h"
 #include "unsup_mvs/io/pcl_cloud.h"
 #include "unsup_mvs/io/ros/ros_conversions.h"
 #include "unsup_mvs/ros/nodelets.h"
@@ -42,6 +45,25 @@ sensor_msgs::PointCloud2 to_cloud_msg(const umvs::PointCloud& cloud, const std::
   // stamp of the newest fused estimate exactly.
   msg.header.frame_id = frame;
   msg.header.stamp = stamp;
+  return msg;
+}
+
+// The 2-D occupancy of the map's height band as nav_msgs/OccupancyGrid (REP 105: in the world
+// frame, z up; cells row-major from the origin, 0 free, 100 occupied, -1 unknown).
+nav_msgs::OccupancyGrid to_grid_msg(const umvs::OccupancyGrid2D& grid, const std::string& frame, const ros::Time& stamp,
+                                    double z) {
+  nav_msgs::OccupancyGrid msg;
+  msg.header.frame_id = frame;
+  msg.header.stamp = stamp;
+  msg.info.map_load_time = stamp;
+  msg.info.resolution = static_cast<float>(grid.resolution);
+  msg.info.width = static_cast<uint32_t>(grid.width);
+  msg.info.height = static_cast<uint32_t>(grid.height);
+  msg.info.origin.position.x = grid.origin_x;
+  msg.info.origin.position.y = grid.origin_y;
+  msg.info.origin.position.z = z;
+  msg.info.origin.orientation.w = 1.0;
+  msg.data = grid.cells;
   return msg;
 }
 
@@ -83,12 +105,17 @@ class FusionNodelet : public nodelet::Nodelet {
       umvs::make_directories(save_dir_);
       fusion_ = std::make_unique<umvs::StreamingFusion>(c.fusion, c.window, static_cast<size_t>(c.max_points),
                                                         umvs::parse_device(c.device));
+      if (c.occupancy) occupancy_ = std::make_unique<umvs::OccupancyMap>(c.occupancy_map);
     } catch (const std::exception& e) {
       NODELET_FATAL("fusion: invalid parameters: %s", e.what());
       throw;
     }
     cloud_pub_ = nh.advertise<sensor_msgs::PointCloud2>("cloud", 1, true);
     increment_pub_ = nh.advertise<sensor_msgs::PointCloud2>("cloud_increment", 5);
+    if (occupancy_) {
+      grid_pub_ = nh.advertise<nav_msgs::OccupancyGrid>("occupancy_grid", 1, true);
+      save_map_srv_ = pnh.advertiseService("save_map", &FusionNodelet::onSaveMap, this);
+    }
     estimate_sub_ = nh.subscribe("depth_estimate", 5, &FusionNodelet::onEstimate, this);
     save_srv_ = pnh.advertiseService("save_cloud", &FusionNodelet::onSave, this);
     reset_srv_ = pnh.advertiseService("reset", &FusionNodelet::onReset, this);
@@ -146,6 +173,8 @@ class FusionNodelet : public nodelet::Nodelet {
     try {
       const auto t0 = ros::WallTime::now();
       const umvs::PointCloud added = fusion_->add(view);
+      // The octree takes every confident pixel: free space needs the rays, not only agreed points.
+      if (occupancy_) occupancy_->integrate(view.depth, view.confidence, view.camera);
       ++estimates_;
       if (!added.empty() && increment_pub_.getNumSubscribers() > 0) {
         increment_pub_.publish(to_cloud_msg(added, world_frame_, msg->header.stamp));
@@ -164,14 +193,17 @@ class FusionNodelet : public nodelet::Nodelet {
 
   void onTimer(const ros::WallTimerEvent&) {
     umvs::PointCloud map;
+    umvs::OccupancyGrid2D grid;
     ros::Time stamp;
     {
       std::lock_guard<std::mutex> lock(mutex_);
       if (!dirty_) return;
       map = fusion_->cloud();
+      if (occupancy_) grid = occupancy_->project(node_.grid_min_z, node_.grid_max_z);
       stamp = last_stamp_;
       dirty_ = false;
     }
+    if (occupancy_) grid_pub_.publish(to_grid_msg(grid, world_frame_, stamp, node_.grid_min_z));
     // Filtered outside the lock: estimates keep being fused meanwhile.
     try {
       cloud_pub_.publish(to_cloud_msg(filtered(map), world_frame_, stamp));
@@ -232,10 +264,34 @@ class FusionNodelet : public nodelet::Nodelet {
     return true;
   }
 
+  // ~save_map: the OctoMap as a binary .bt (octomap's tools, octomap_server), only inside ~save_dir,
+  // written atomically. Answers num_points = occupied leaves.
+  bool onSaveMap(unsup_mvs::SaveCloud::Request& req, unsup_mvs::SaveCloud::Response& res) {
+    const std::string requested = req.path.empty() ? std::string("unsup_mvs_map.bt") : req.path;
+    try {
+      const std::string path = umvs::resolve_inside(save_dir_, requested);
+      if (std::filesystem::path(path).extension() != ".bt") {
+        throw std::invalid_argument("'" + requested + "' is not a .bt file (OctoMap's binary format)");
+      }
+      std::lock_guard<std::mutex> lock(mutex_);
+      occupancy_->save(path);
+      res.num_points = occupancy_->occupied_leaves();
+      res.success = true;
+      res.message = "wrote " + std::to_string(res.num_points) + " occupied leaves to " + path;
+      NODELET_INFO("fusion: %s", res.message.c_str());
+    } catch (const std::exception& e) {
+      res.success = false;
+      res.message = std::string("refused: ") + e.what() + "; nothing written";
+      NODELET_ERROR("fusion: save_map %s", res.message.c_str());
+    }
+    return true;
+  }
+
   bool onReset(unsup_mvs::ResetFusion::Request&, unsup_mvs::ResetFusion::Response& res) {
     std::lock_guard<std::mutex> lock(mutex_);
     const size_t before = fusion_->cloud().size();
     fusion_->reset();
+    if (occupancy_) occupancy_->clear();
     estimates_ = 0;
     dirty_ = true;  // publish the empty map once
     res.success = true;
@@ -252,12 +308,13 @@ class FusionNodelet : public nodelet::Nodelet {
   umvs::CloudFilterConfig filters_;
   std::mutex mutex_;
   std::unique_ptr<umvs::StreamingFusion> fusion_;
+  std::unique_ptr<umvs::OccupancyMap> occupancy_;  // null when ~occupancy/enabled is false
   long estimates_ = 0;
   bool dirty_ = false;
   ros::Time last_stamp_;
-  ros::Publisher cloud_pub_, increment_pub_;
+  ros::Publisher cloud_pub_, increment_pub_, grid_pub_;
   ros::Subscriber estimate_sub_;
-  ros::ServiceServer save_srv_, reset_srv_;
+  ros::ServiceServer save_srv_, reset_srv_, save_map_srv_;
   ros::WallTimer timer_;
   std::unique_ptr<ReconfigureServer<unsup_mvs::FusionConfig>> reconfigure_;
 };

@@ -126,6 +126,8 @@ InferenceNodeConfig inference_node_config_from_ros(const ros::NodeHandle& nh) {
 
 void FusionNodeConfig::validate() const {
   fusion.validate();
+  occupancy_map.validate();
+  if (!(grid_max_z > grid_min_z)) throw std::invalid_argument("occupancy/grid_max_z must be above occupancy/grid_min_z");
   umvs::parse_device(device);
   if (max_image_pixels < 1) throw std::invalid_argument("max_image_pixels must be >= 1");
   if (window < 1) throw std::invalid_argument("window must be >= 1");
@@ -161,6 +163,16 @@ FusionNodeConfig fusion_node_config_from_ros(const ros::NodeHandle& nh) {
   filter.param("radius", c.filters.radius, c.filters.radius);
   filter.param("radius_min_neighbors", c.filters.radius_min_neighbors, c.filters.radius_min_neighbors);
   filter.param("voxel_leaf", c.filters.voxel_leaf, c.filters.voxel_leaf);
+  const ros::NodeHandle occupancy(nh, "occupancy");
+  occupancy.param("enabled", c.occupancy, c.occupancy);
+  occupancy.param("resolution", c.occupancy_map.resolution, c.occupancy_map.resolution);
+  occupancy.param("max_range", c.occupancy_map.max_range, c.occupancy_map.max_range);
+  occupancy.param("prob_hit", c.occupancy_map.prob_hit, c.occupancy_map.prob_hit);
+  occupancy.param("prob_miss", c.occupancy_map.prob_miss, c.occupancy_map.prob_miss);
+  occupancy.param("min_confidence", c.occupancy_map.min_confidence, c.occupancy_map.min_confidence);
+  occupancy.param("pixel_stride", c.occupancy_map.pixel_stride, c.occupancy_map.pixel_stride);
+  occupancy.param("grid_min_z", c.grid_min_z, c.grid_min_z);
+  occupancy.param("grid_max_z", c.grid_max_z, c.grid_max_z);
   c.validate();
   return c;
 }

@@ -3,11 +3,14 @@
 // that PCL opens, with the same points, refuses other extensions and never replaces a good file
 // with nothing; reset clears; bad estimates (another world frame, NaN pose, wrong depth encoding)
 // are logged and skipped.
+#include <nav_msgs/OccupancyGrid.h>
+#include <octomap/OcTree.h>
 #include <pcl/io/pcd_io.h>
 #include <sensor_msgs/PointCloud2.h>
 #include <sensor_msgs/point_cloud2_iterator.h>
 #include <torch/torch.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 
@@ -147,6 +150,67 @@ TEST_F(FusionTest, PlaneBecomesACloudAndIsSaved) {
   EXPECT_EQ(res.num_points, 0u);
   EXPECT_EQ(std::filesystem::file_size(path), size_before);
   ASSERT_TRUE(wait_for([&] { return cloud_ && cloud_->width == 0; }, 5.0)) << "the empty map is published after reset";
+}
+
+// The plane's depth maps ray-cast into the OctoMap: the grid of the band around z = 3 is occupied
+// where the cameras saw the plane, in the world frame; save_map writes a .bt octomap reads, only
+// inside ~save_dir.
+TEST_F(FusionTest, OccupancyGridAndOctoMap) {
+  nav_msgs::OccupancyGridConstPtr grid;
+  ros::Subscriber grid_sub = nh_.subscribe<nav_msgs::OccupancyGrid>(
+      "/occupancy_grid", 5, [&](const nav_msgs::OccupancyGridConstPtr& m) { grid = m; });
+  ros::Time last_stamp;
+  for (uint32_t i = 0; i < 5; ++i) {
+    const auto e = make_estimate(20 + i, 0.1 * i);
+    last_stamp = e.header.stamp;
+    estimate_pub_.publish(e);
+    ros::WallDuration(0.1).sleep();
+  }
+  ASSERT_TRUE(wait_for([&] { return grid && grid->header.stamp == last_stamp; }, 20.0));
+  EXPECT_EQ(grid->header.frame_id, "world");
+  EXPECT_FLOAT_EQ(grid->info.resolution, 0.05f);
+  ASSERT_EQ(grid->data.size(), static_cast<size_t>(grid->info.width) * grid->info.height);
+  // The cameras (x 0 .. 0.4, 64 x 48 px at f = 50) see the plane z = 3 over x -1.92 .. 2.32, y -1.44 .. 1.44.
+  int occupied = 0, outside = 0;
+  double min_x = 1e9, max_x = -1e9, min_y = 1e9, max_y = -1e9;
+  for (uint32_t j = 0; j < grid->info.height; ++j) {
+    for (uint32_t i = 0; i < grid->info.width; ++i) {
+      if (grid->data[j * grid->info.width + i] != 100) continue;
+      ++occupied;
+      const double x = grid->info.origin.position.x + (i + 0.5) * grid->info.resolution;
+      const double y = grid->info.origin.position.y + (j + 0.5) * grid->info.resolution;
+      outside += x < -2.05 || x > 2.45 || std::abs(y) > 1.55;
+      min_x = std::min(min_x, x), max_x = std::max(max_x, x), min_y = std::min(min_y, y), max_y = std::max(max_y, y);
+    }
+  }
+  // Rays every 2nd pixel (~12 cm apart on the plane) from 5 cameras 10 cm apart: over 1,000 cells,
+  // spread over the whole footprint, none outside it.
+  EXPECT_GT(occupied, 1000);
+  EXPECT_EQ(outside, 0);
+  EXPECT_LT(min_x, -1.7);
+  EXPECT_GT(max_x, 2.1);
+  EXPECT_LT(min_y, -1.2);
+  EXPECT_GT(max_y, 1.2);
+
+  ros::ServiceClient save_map = nh_.serviceClient<unsup_mvs::SaveCloud>("/fusion/save_map");
+  unsup_mvs::SaveCloud srv;
+  srv.request.path = "plane.bt";
+  ASSERT_TRUE(save_map.call(srv));
+  ASSERT_TRUE(srv.response.success) << srv.response.message;
+  octomap::OcTree tree(dir_ + "/plane.bt");
+  EXPECT_EQ(tree.getResolution(), 0.05);
+  const octomap::OcTreeNode* on_plane = tree.search(0.2, 0.0, 3.0);
+  const octomap::OcTreeNode* in_front = tree.search(0.2, 0.0, 1.5);  // between the cameras and the plane
+  ASSERT_TRUE(on_plane && in_front) << "both were observed";
+  EXPECT_TRUE(tree.isNodeOccupied(on_plane));
+  EXPECT_FALSE(tree.isNodeOccupied(in_front));
+  for (const char* bad : {"plane.ply", "../escaped.bt"}) {
+    srv.request.path = bad;
+    ASSERT_TRUE(save_map.call(srv));
+    EXPECT_FALSE(srv.response.success) << bad;
+    EXPECT_NE(srv.response.message.find("refused"), std::string::npos) << srv.response.message;
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir_ + "/plane.ply"));
 }
 
 TEST_F(FusionTest, BadEstimatesAreLoggedAndSkipped) {

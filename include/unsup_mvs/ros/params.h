@@ -12,6 +12,7 @@
 #include "unsup_mvs/core/keyframes.h"
 #include "unsup_mvs/io/cloud_filter.h"
 #include "unsup_mvs/io/fine_tune_job.h"
+#include "unsup_mvs/io/occupancy_map.h"
 
 namespace umvs_ros {
 
@@ -35,7 +36,6 @@ umvs::FusionConfig fusion_config_from_ros(const ros::NodeHandle& nh);
 inline umvs::DepthEstimatorConfig inference_estimator_defaults() {
   umvs::DepthEstimatorConfig c{640, 512, 0};
   c.completion.min_confidence = umvs::kRecommendedCompletionConfidence;
-  c.min_parallax_px = umvs::kRecommendedMinParallaxPx;
   // `auto`, as `umvs infer`. Since the trainer's train_args label and judge with one pass per source
   // too, the models its rule reloads beat what `auto` served (docs/results.md).
   c.source_combination = umvs::kRecommendedSourceCombination;
@@ -78,6 +78,15 @@ struct FusionNodeConfig {
   std::string default_save_path = "unsup_mvs_cloud.ply";
   int max_image_pixels = 2048 * 2048;
   umvs::CloudFilterConfig filters;  // ~filter/: applied to the published and saved map (all off by default)
+  // ~occupancy/: the OctoMap every accepted depth map is ray-cast into (io/occupancy_map.h) and the
+  // height band (world z, metres) projected to the published nav_msgs/OccupancyGrid.
+  bool occupancy = true;
+  umvs::OccupancyMapConfig occupancy_map = [] {
+    umvs::OccupancyMapConfig c;
+    c.pixel_stride = 2;  // a quarter of the rays: the live node keeps up on 2 cores
+    return c;
+  }();
+  double grid_min_z = 0.1, grid_max_z = 1.5;
   void validate() const;
 };
 FusionNodeConfig fusion_node_config_from_ros(const ros::NodeHandle& nh);
