@@ -144,6 +144,13 @@ TEST(MvsFolder, AlmostRotationsAreRepairedAndFarOnesRefused) {
   EXPECT_LT(rotation_angle(repaired.R(), R), 2e-4);  // the nearest rotation, not some other one
   EXPECT_DOUBLE_EQ(repaired.t().y(), 0.1);           // the translation as written
 
+  // Within validate()'s tolerance a file is read as written, bit for bit (parity with other code
+  // reading the same cam files depends on it).
+  Eigen::Matrix3d nearly = R;
+  nearly(0, 1) += 2e-5;
+  write_with(nearly);
+  EXPECT_EQ(read_cam_file(dir + "/cam.txt").camera.R(), nearly);
+
   Eigen::Matrix3d far = R;
   far(0, 0) += 0.05;
   write_with(far);

@@ -110,7 +110,7 @@ void Camera::validate(const std::string& what) const {
     fail(os.str());
   }
   const Eigen::Matrix3d RtR = R().transpose() * R();
-  if (!RtR.isIdentity(1e-4) || R().determinant() < 0.0) {
+  if (!RtR.isIdentity(kRotationTolerance) || R().determinant() < 0.0) {
     std::ostringstream os;
     os << "rotation of the world-to-camera pose is not a proper rotation (R^T R - I max "
        << (RtR - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff() << ", det " << R().determinant()

@@ -34,18 +34,19 @@ double MvsCam::resolved_depth_max(int default_num) const {
 
 namespace {
 
-// Pose files written with few digits hold almost-rotations: those within
-// kMaxRotationRepairError are replaced by the nearest rotation, with one warning per process
-// (a sequence repeats the problem in every file); anything further off is left for validate()
-// to refuse.
+// Pose files written with few digits hold almost-rotations: those beyond validate()'s tolerance
+// but within kMaxRotationRepairError are replaced by the nearest rotation, with one warning per
+// process (a sequence repeats the problem in every file). Files within the tolerance are read as
+// written; anything further off is left for validate() to refuse.
 void repair_rotation(Camera& camera, const std::string& path) {
   const Eigen::Matrix3d R = camera.R();
   if (!R.allFinite() || R.determinant() <= 0.0) return;
+  if ((R.transpose() * R).isIdentity(kRotationTolerance)) return;
   const double error = orthonormality_error(R);
-  if (error <= 1e-9 || error > kMaxRotationRepairError) return;
+  if (error > kMaxRotationRepairError) return;
   camera.T_cam_world.topLeftCorner<3, 3>() = nearest_rotation(R);
   static std::atomic<bool> warned{false};
-  if (error > 1e-6 && !warned.exchange(true)) {
+  if (!warned.exchange(true)) {
     std::cerr << "warning: camera file '" << path << "': rotation re-orthonormalised (R^T R - I max " << error
               << "); other files of this kind are repaired without a message\n";
   }

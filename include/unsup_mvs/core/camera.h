@@ -72,8 +72,10 @@ double orthonormality_error(const Eigen::Matrix3d& R);
 // The rotation nearest to R in the Frobenius norm (U V^T of its SVD, with det +1). Pose files
 // written with few digits (7-Scenes: R^T R - I up to 1e-4) hold almost-rotations.
 Eigen::Matrix3d nearest_rotation(const Eigen::Matrix3d& R);
-// Pose files whose rotation is off by at most this much are re-orthonormalised with a warning;
-// more is refused as not a rotation.
+// Camera::validate accepts rotations whose R^T R is the identity to this precision. Pose files off
+// by more, up to kMaxRotationRepairError, are re-orthonormalised with a warning (files within
+// the tolerance are read as written, bit for bit); more is refused as not a rotation.
+constexpr double kRotationTolerance = 1e-4;
 constexpr double kMaxRotationRepairError = 1e-2;
 
 // Rotation angle (radians) between two rotation matrices.
