@@ -194,16 +194,18 @@ class FusionNodelet : public nodelet::Nodelet {
   void onTimer(const ros::WallTimerEvent&) {
     umvs::PointCloud map;
     umvs::OccupancyGrid2D grid;
+    double grid_z = 0.0;  // node_ is read under the lock: onReconfigure replaces it
     ros::Time stamp;
     {
       std::lock_guard<std::mutex> lock(mutex_);
       if (!dirty_) return;
       map = fusion_->cloud();
       if (occupancy_) grid = occupancy_->project(node_.grid_min_z, node_.grid_max_z);
+      grid_z = node_.grid_min_z;
       stamp = last_stamp_;
       dirty_ = false;
     }
-    if (occupancy_) grid_pub_.publish(to_grid_msg(grid, world_frame_, stamp, node_.grid_min_z));
+    if (occupancy_) grid_pub_.publish(to_grid_msg(grid, world_frame_, stamp, grid_z));
     // Filtered outside the lock: estimates keep being fused meanwhile.
     try {
       cloud_pub_.publish(to_cloud_msg(filtered(map), world_frame_, stamp));
