@@ -33,6 +33,8 @@ void FusionConfig::validate() const {
   if (min_agreeing_views < 0 || min_agreeing_views > 255) fail("min_agreeing_views must be in [0,255], got " + std::to_string(min_agreeing_views));
   if (max_source_views < 1) fail("max_source_views must be >= 1, got " + std::to_string(max_source_views));
   if (!(voxel_size >= 0.0) || !std::isfinite(voxel_size)) fail("voxel_size must be >= 0 (0 = off), got " + std::to_string(voxel_size));
+  if (clear_after_views < 0 || clear_after_views > 255) fail("clear_after_views must be in [0,255] (0 = never clear), got " + std::to_string(clear_after_views));
+  if (!(clear_margin > 0.0) || !std::isfinite(clear_margin)) fail("clear_margin must be > 0, got " + std::to_string(clear_margin));
 }
 
 namespace {
@@ -679,6 +681,8 @@ size_t StreamingFusion::num_views() const { return ring_.size(); }
 void StreamingFusion::reset() {
   ring_.clear();
   cloud_.clear();
+  seen_through_.clear();
+  points_cleared_ = 0;
   voxels_.clear();
 }
 
@@ -690,6 +694,7 @@ PointCloud StreamingFusion::add(const FusionView& view) {
   entry->count = torch::zeros_like(entry->view.depth, torch::kInt32);
   entry->depth_sum = entry->view.depth.clone();
   entry->emitted = torch::zeros_like(entry->view.valid);
+  clear_free_space(entry->view.depth.cpu(), entry->view.valid.cpu(), entry->view.camera);
 
   auto emit = [&](Entry& e, PointCloud& out) {
     auto fresh = e.view.valid & ~e.emitted & (e.count >= config_.min_agreeing_views);
@@ -714,6 +719,7 @@ PointCloud StreamingFusion::add(const FusionView& view) {
 void StreamingFusion::append_points(PointCloud& points) {
   if (config_.voxel_size > 0) points = voxel_filter(points, config_.voxel_size, voxels_);
   cloud_.append(points);
+  seen_through_.resize(cloud_.size(), 0);
   if (cloud_.size() <= max_points_) return;
   // Drop the oldest points, leaving 10% headroom so that eviction is rare.
   const size_t keep = std::max<size_t>(1, max_points_ - max_points_ / 10);
@@ -725,7 +731,63 @@ void StreamingFusion::append_points(PointCloud& points) {
   erase_front(cloud_.colors);
   erase_front(cloud_.confidence);
   erase_front(cloud_.num_views);
+  erase_front(seen_through_);
   if (config_.voxel_size > 0) rebuild_voxel_index();
+}
+
+void StreamingFusion::clear_free_space(const torch::Tensor& depth, const torch::Tensor& valid, const Camera& camera) {
+  if (config_.clear_after_views <= 0 || cloud_.empty()) return;
+  const auto evidence = free_space_evidence(cloud_, depth, valid, camera, config_.clear_margin);
+  std::vector<uint8_t> remove(cloud_.size(), 0);
+  bool any = false;
+  for (size_t i = 0; i < evidence.size(); ++i) {
+    if (evidence[i] == FreeSpaceEvidence::kSeenAgain) {
+      seen_through_[i] = 0;
+    } else if (evidence[i] == FreeSpaceEvidence::kSeenThrough && ++seen_through_[i] >= config_.clear_after_views) {
+      remove[i] = 1;
+      any = true;
+    }
+  }
+  if (!any) return;
+  points_cleared_ += static_cast<int64_t>(cloud_.erase(remove));
+  size_t kept = 0;
+  for (size_t i = 0; i < remove.size(); ++i) {
+    if (!remove[i]) seen_through_[kept++] = seen_through_[i];
+  }
+  seen_through_.resize(kept);
+  rebuild_voxel_index();  // the freed voxels may take new points
+}
+
+std::vector<FreeSpaceEvidence> free_space_evidence(const PointCloud& cloud, const torch::Tensor& depth,
+                                                   const torch::Tensor& valid, const Camera& camera, double margin) {
+  const auto d = depth.to(torch::kFloat32).contiguous();
+  const auto ok = valid.to(torch::kBool).contiguous();
+  const auto da = d.accessor<float, 2>();
+  const auto va = ok.accessor<bool, 2>();
+  const int64_t H = d.size(0), W = d.size(1);
+  std::vector<FreeSpaceEvidence> out(cloud.size(), FreeSpaceEvidence::kNone);
+  at::parallel_for(0, static_cast<int64_t>(cloud.size()), 4096, [&](int64_t begin, int64_t end) {
+    for (int64_t i = begin; i < end; ++i) {
+      Eigen::Vector2d uv;
+      double z = 0;
+      if (!camera.project(cloud.points[i].cast<double>(), &uv, &z) || !(z > 0)) continue;
+      // Pixel centres are at integer coordinates; the whole 3x3 around the nearest must be in the image.
+      if (!(uv.x() >= 0.5 && uv.y() >= 0.5 && uv.x() < W - 1.5 && uv.y() < H - 1.5)) continue;
+      const int64_t x = std::lround(uv.x()), y = std::lround(uv.y());
+      if (va[y][x] && std::abs(da[y][x] - z) <= margin * z) {
+        out[i] = FreeSpaceEvidence::kSeenAgain;
+        continue;
+      }
+      bool through = true;
+      for (int64_t dy = -1; dy <= 1 && through; ++dy) {
+        for (int64_t dx = -1; dx <= 1 && through; ++dx) {
+          through = va[y + dy][x + dx] && da[y + dy][x + dx] > (1.0 + margin) * z;
+        }
+      }
+      if (through) out[i] = FreeSpaceEvidence::kSeenThrough;
+    }
+  });
+  return out;
 }
 
 void StreamingFusion::rebuild_voxel_index() {

@@ -1,5 +1,7 @@
 #include "unsup_mvs/core/point_cloud.h"
 
+#include <stdexcept>
+
 namespace umvs {
 
 namespace {
@@ -23,6 +25,24 @@ void PointCloud::append(const PointCloud& other) {
   append_attribute(confidence, other.confidence, n, m);
   append_attribute(num_views, other.num_views, n, m);
   points.insert(points.end(), other.points.begin(), other.points.end());
+}
+
+size_t PointCloud::erase(const std::vector<uint8_t>& remove) {
+  const size_t n = size();
+  if (remove.size() != n) throw std::invalid_argument("PointCloud::erase: one entry per point expected");
+  auto compact = [&](auto& attribute) {
+    if (attribute.size() != n) return;
+    size_t kept = 0;
+    for (size_t i = 0; i < n; ++i) {
+      if (!remove[i]) attribute[kept++] = attribute[i];
+    }
+    attribute.resize(kept);
+  };
+  compact(colors);
+  compact(confidence);
+  compact(num_views);
+  compact(points);
+  return n - points.size();
 }
 
 void PointCloud::clear() {

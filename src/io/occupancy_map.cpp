@@ -125,6 +125,16 @@ void OccupancyMap::save(const std::string& path) const {
 
 void OccupancyMap::clear() { tree_->tree.clear(); }
 
+bool OccupancyMap::set_config(const OccupancyMapConfig& config) {
+  config.validate();
+  const bool new_resolution = config.resolution != config_.resolution;
+  config_ = config;
+  if (new_resolution) tree_ = std::make_unique<Tree>(config_.resolution);
+  tree_->tree.setProbHit(config_.prob_hit);
+  tree_->tree.setProbMiss(config_.prob_miss);
+  return new_resolution;
+}
+
 #else  // no OctoMap in this build
 
 struct OccupancyMap::Tree {};
@@ -139,6 +149,7 @@ size_t OccupancyMap::free_leaves() const { return 0; }
 OccupancyGrid2D OccupancyMap::project(double, double) const { return {}; }
 void OccupancyMap::save(const std::string&) const {}
 void OccupancyMap::clear() {}
+bool OccupancyMap::set_config(const OccupancyMapConfig&) { return false; }
 
 #endif
 

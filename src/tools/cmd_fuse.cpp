@@ -124,6 +124,10 @@ UMVS_COMMAND(fuse, "fuse depth maps into one consistent point cloud (PLY or PCD)
       .option("ref", "", "comma-separated view ids to fuse (default: all in pair.txt with a depth map)")
       .flag("stream", "use the streaming fusion (views in pair.txt order, --window recent estimates)")
       .option("window", "10", "with --stream: estimates kept in the ring")
+      .option("clear-after-views", fusion_defaults.clear_after_views,
+              "with --stream: a point leaves the cloud when this many estimates in a row see through it (0 = never)")
+      .option("clear-margin", fusion_defaults.clear_margin,
+              "with --stream: seen through = farther than (1 + this) x the point's depth")
       .option("sor-k", "0", "statistical outlier removal: neighbours per point (PCL mean-K; 0 = off)")
       .option("sor-std", "2.0", "statistical outlier removal: drop points farther than mean + this many std devs")
       .option("radius", "0", "radius outlier removal: search radius in scene units (0 = off)")
@@ -131,7 +135,7 @@ UMVS_COMMAND(fuse, "fuse depth maps into one consistent point cloud (PLY or PCD)
       .option("voxel-grid", "0", "PCL voxel grid leaf in scene units: one averaged point per cube (0 = off)")
       .option("bbox", "", "xmin,ymin,zmin,xmax,ymax,zmax: also report the share of points inside")
       .option("device", "cpu", "cpu | cuda | cuda:N")
-      .option("threads", "0", "CPU threads (0 = all cores)");
+      .option("threads", 0, "CPU threads (0 = all cores)");
   if (!args.parse(argc, argv)) return 0;
   umvs::configure_threads(args.integer("threads"));
   const auto device = umvs::parse_device(args.str("device"));
@@ -143,6 +147,8 @@ UMVS_COMMAND(fuse, "fuse depth maps into one consistent point cloud (PLY or PCD)
   cfg.max_source_views = args.integer("max-sources");
   cfg.voxel_size = args.real("voxel");
   cfg.source_rule = umvs::fusion_source_rule_from_string(args.str("source-rule"));
+  cfg.clear_after_views = args.integer("clear-after-views");
+  cfg.clear_margin = args.real("clear-margin");
   cfg.validate();
   umvs::CloudFilterConfig filters;
   filters.sor_mean_k = args.integer("sor-k");
@@ -215,6 +221,8 @@ UMVS_COMMAND(fuse, "fuse depth maps into one consistent point cloud (PLY or PCD)
                   std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count());
     }
     cloud = stream.cloud();
+    std::printf("%lld points removed as free space (seen through by %d estimates in a row)\n",
+                static_cast<long long>(stream.points_cleared()), cfg.clear_after_views);
   } else {
     std::vector<umvs::FusionViewStats> stats;
     cloud = umvs::DepthFusion(cfg, device).fuse(views, sources, &stats);

@@ -56,6 +56,10 @@ struct FusionConfig {
   double voxel_size = 0.0;          // > 0: at most one point per voxel of this edge (metres),
                                     // the first one fused wins; 0 = off (one point per pixel)
   FusionSourceRule source_rule = FusionSourceRule::kConfidentNeighbours;
+  // Free-space clearing (StreamingFusion only; see there): a point leaves the cloud once this
+  // many estimates in a row have seen through it; 0 = points stay forever.
+  int clear_after_views = 3;
+  double clear_margin = 0.05;  // "seen through": farther than (1 + clear_margin) x the point's depth
 
   // Throws std::invalid_argument naming the offending field.
   void validate() const;
@@ -125,6 +129,14 @@ class DepthFusion {
 // Memory is bounded: `window` estimates on the device and at most `max_points` points (the
 // oldest are dropped first); with voxel_size > 0 a voxel hash keeps overlapping views from
 // piling up duplicates.
+// A map that forgets what moved: each new estimate is also free-space evidence. A cloud point is
+// seen through when every pixel of the 3x3 around its projection is a valid estimate (confidence
+// >= min_confidence) farther than (1 + clear_margin) x the point's depth, and seen again when the
+// pixel it projects to holds its depth within that margin. A point seen through by
+// clear_after_views estimates with none seeing it again in between is removed: an object that
+// left is forgotten after a few looks, while a wall survives a confidently wrong estimate or
+// noise, which rarely shows through it in a neighbourhood and several estimates in a row. Pixels
+// that are no estimate, and points hidden behind something nearer, count neither way.
 class StreamingFusion {
  public:
   StreamingFusion(FusionConfig config, int window, size_t max_points, torch::Device device);
@@ -138,6 +150,7 @@ class StreamingFusion {
   void reset();                                       // forget the estimates and the cloud
   size_t num_views() const;                           // estimates currently in the ring
   int window() const { return window_; }
+  int64_t points_cleared() const { return points_cleared_; }  // removed as free space since reset
   const FusionConfig& config() const { return config_; }
   // New thresholds for the estimates added from now on (live tuning). Throws
   // std::invalid_argument naming the field, keeping the old ones. Stored estimates keep the
@@ -147,6 +160,7 @@ class StreamingFusion {
  private:
   struct Entry;
   void append_points(PointCloud& points);
+  void clear_free_space(const torch::Tensor& depth, const torch::Tensor& valid, const Camera& camera);
   void rebuild_voxel_index();  // voxels_ from cloud_ at config_.voxel_size
   FusionConfig config_;
   int window_;
@@ -154,8 +168,16 @@ class StreamingFusion {
   torch::Device device_;
   std::deque<std::unique_ptr<Entry>> ring_;
   PointCloud cloud_;
+  std::vector<uint8_t> seen_through_;  // per point of cloud_: estimates in a row that saw through it
+  int64_t points_cleared_ = 0;
   std::unordered_set<int64_t> voxels_;
 };
+
+// What one depth map says about a point (the rule in StreamingFusion's comment).
+enum class FreeSpaceEvidence : uint8_t { kNone, kSeenThrough, kSeenAgain };
+// depth [H,W] float32 and valid [H,W] bool on the CPU, of `camera`. -> one entry per cloud point.
+std::vector<FreeSpaceEvidence> free_space_evidence(const PointCloud& cloud, const torch::Tensor& depth,
+                                                   const torch::Tensor& valid, const Camera& camera, double margin);
 
 // --- building blocks (exposed for tests and benchmarks) ------------------------------------
 

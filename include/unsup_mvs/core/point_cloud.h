@@ -19,6 +19,9 @@ struct PointCloud {
   bool has_colors() const { return !colors.empty(); }
   // Appends `other`; attributes present in only one of the clouds are dropped.
   void append(const PointCloud& other);
+  // Removes the points whose entry in `remove` (one per point) is non-zero, keeping the order of
+  // the others. Returns how many were removed.
+  size_t erase(const std::vector<uint8_t>& remove);
   void clear();
 };
 

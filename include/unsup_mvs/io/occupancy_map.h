@@ -2,7 +2,10 @@
 // confident depth pixel is a ray from its camera, free along the way and occupied at its end
 // (octomap's probabilistic update, clamped). Saved as a binary .bt file that octomap's tools
 // (octovis, octomap_server) read, and projected to a 2-D grid over a height band
-// (nav_msgs/OccupancyGrid's convention: 0 free, 100 occupied, -1 unknown). Needs liboctomap
+// (nav_msgs/OccupancyGrid's convention: 0 free, 100 occupied, -1 unknown). The update is what
+// makes the map forget what moved: rays through a cell that an object has left lower its
+// log-odds each time, and after enough of them (about nine depth maps at octomap's clamping and the
+// default probabilities) it is free again, while a single noisy ray cannot free a wall. Needs liboctomap
 // (UMVS_HAVE_OCTOMAP); without it the constructor throws std::runtime_error saying so.
 #pragma once
 
@@ -59,6 +62,11 @@ class OccupancyMap {
   // Writes the binary .bt atomically (an existing file is kept when writing fails).
   void save(const std::string& path) const;
   void clear();
+  // Live tuning: probabilities, range, confidence and stride apply to the depth maps integrated
+  // from now on; a new resolution starts an empty map (the leaves cannot be resized). Returns
+  // whether the map was cleared. Throws std::invalid_argument naming the field, keeping the old
+  // settings.
+  bool set_config(const OccupancyMapConfig& config);
   const OccupancyMapConfig& config() const { return config_; }
 
  private:
