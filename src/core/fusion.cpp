@@ -766,14 +766,17 @@ std::vector<FreeSpaceEvidence> free_space_evidence(const PointCloud& cloud, cons
   const auto va = ok.accessor<bool, 2>();
   const int64_t H = d.size(0), W = d.size(1);
   std::vector<FreeSpaceEvidence> out(cloud.size(), FreeSpaceEvidence::kNone);
+  // One 3x4 projection in float for every point (the cloud can hold millions).
+  const Eigen::Matrix<float, 3, 4> P = camera.projection().cast<float>();
   at::parallel_for(0, static_cast<int64_t>(cloud.size()), 4096, [&](int64_t begin, int64_t end) {
     for (int64_t i = begin; i < end; ++i) {
-      Eigen::Vector2d uv;
-      double z = 0;
-      if (!camera.project(cloud.points[i].cast<double>(), &uv, &z) || !(z > 0)) continue;
+      const Eigen::Vector3f q = P.leftCols<3>() * cloud.points[i] + P.col(3);
+      const float z = q.z();  // K's last row is (0 0 1): the z-depth
+      if (!(z > 0)) continue;
+      const float u = q.x() / z, v = q.y() / z;
       // Pixel centres are at integer coordinates; the whole 3x3 around the nearest must be in the image.
-      if (!(uv.x() >= 0.5 && uv.y() >= 0.5 && uv.x() < W - 1.5 && uv.y() < H - 1.5)) continue;
-      const int64_t x = std::lround(uv.x()), y = std::lround(uv.y());
+      if (!(u >= 0.5f && v >= 0.5f && u < W - 1.5f && v < H - 1.5f)) continue;
+      const int64_t x = std::lround(u), y = std::lround(v);
       if (va[y][x] && std::abs(da[y][x] - z) <= margin * z) {
         out[i] = FreeSpaceEvidence::kSeenAgain;
         continue;
