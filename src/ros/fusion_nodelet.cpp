@@ -1,5 +1,6 @@
 // fusion: DepthEstimate stream -> core::StreamingFusion -> PointCloud2 (x y z rgb confidence views
-// in the world frame, built with PCL). `cloud` carries the whole (bounded) map at ~publish_rate Hz,
+// in the world frame, built with PCL). `cloud` carries the whole (bounded) map at ~publish_rate Hz
+// (points that later estimates see through are removed from it, core/fusion.h),
 // after the optional ~filter/ stages, `cloud_increment` the points each depth estimate adds, as
 // soon as they exist. save_cloud writes .ply or .pcd (by extension) only inside ~save_dir.
 // The thresholds can be tuned live (dynamic_reconfigure, cfg/Fusion.cfg). See docs/ros.md.
@@ -29,6 +30,7 @@
 #include "unsup_mvs/io/pcl_cloud.h"
 #include "unsup_mvs/io/ros/ros_conversions.h"
 #include "unsup_mvs/ros/nodelets.h"
+#include "unsup_mvs/ros/live_settings.h"
 #include "unsup_mvs/ros/params.h"
 #include "unsup_mvs/ros/reconfigure.h"
 
@@ -67,25 +69,6 @@ nav_msgs::OccupancyGrid to_grid_msg(const umvs::OccupancyGrid2D& grid, const std
   return msg;
 }
 
-// The live-tunable thresholds (cfg/Fusion.cfg), both ways.
-unsup_mvs::FusionConfig to_reconfigure(const umvs::FusionConfig& c) {
-  unsup_mvs::FusionConfig r = unsup_mvs::FusionConfig::__getDefault__();
-  r.min_confidence = c.min_confidence;
-  r.max_reprojection_px = c.max_reprojection_px;
-  r.max_relative_depth = c.max_relative_depth;
-  r.min_agreeing_views = c.min_agreeing_views;
-  r.voxel_size = c.voxel_size;
-  return r;
-}
-
-umvs::FusionConfig with_reconfigure(umvs::FusionConfig c, const unsup_mvs::FusionConfig& r) {
-  c.min_confidence = r.min_confidence;
-  c.max_reprojection_px = r.max_reprojection_px;
-  c.max_relative_depth = r.max_relative_depth;
-  c.min_agreeing_views = r.min_agreeing_views;
-  c.voxel_size = r.voxel_size;
-  return c;
-}
 
 }  // namespace
 
@@ -121,13 +104,14 @@ class FusionNodelet : public nodelet::Nodelet {
     reset_srv_ = pnh.advertiseService("reset", &FusionNodelet::onReset, this);
     timer_ = nh.createWallTimer(ros::WallDuration(1.0 / node_.publish_rate), &FusionNodelet::onTimer, this);
     reconfigure_ = std::make_unique<ReconfigureServer<unsup_mvs::FusionConfig>>(
-        pnh, "fusion", to_reconfigure(node_.fusion), [this](const unsup_mvs::FusionConfig& r) { onReconfigure(r); });
+        pnh, "fusion", to_reconfigure(node_), [this](const unsup_mvs::FusionConfig& r) { onReconfigure(r); });
     const auto& c = node_.fusion;
     NODELET_INFO("fusion: window %d, at most %d points, voxel %.3f m, a point needs %d agreeing views "
-                 "(%.1f px, %.1f%% depth, confidence >= %.2f), map published at %.1f Hz in '%s', clouds saved "
-                 "into %s",
+                 "(%.1f px, %.1f%% depth, confidence >= %.2f) and leaves when %d estimates in a row see through it "
+                 "(0 = never), map published at %.1f Hz in '%s', clouds saved into %s",
                  node_.window, node_.max_points, c.voxel_size, c.min_agreeing_views, c.max_reprojection_px,
-                 100 * c.max_relative_depth, c.min_confidence, node_.publish_rate, world_frame_.c_str(), save_dir_.c_str());
+                 100 * c.max_relative_depth, c.min_confidence, c.clear_after_views, node_.publish_rate,
+                 world_frame_.c_str(), save_dir_.c_str());
     if (filters_.any()) {
       NODELET_INFO("fusion: map filtered before publishing/saving: statistical mean_k %d (std x %.2f), radius %.4f m "
                    "(>= %d neighbours), voxel leaf %.4f m (0 = off)",
@@ -139,12 +123,16 @@ class FusionNodelet : public nodelet::Nodelet {
   // New thresholds from dynamic_reconfigure: checked as at start-up, used from the next estimate.
   // Throws std::invalid_argument (naming the parameter) and changes nothing when they are invalid.
   void onReconfigure(const unsup_mvs::FusionConfig& request) {
-    FusionNodeConfig next = node_;
-    next.fusion = with_reconfigure(node_.fusion, request);
+    const FusionNodeConfig next = with_reconfigure(node_, request);
     next.validate();
     std::lock_guard<std::mutex> lock(mutex_);
     fusion_->set_config(next.fusion);
+    if (occupancy_ && occupancy_->set_config(next.occupancy_map)) {
+      NODELET_WARN("fusion: occupancy resolution now %.3f m: the occupancy map starts again, empty",
+                   next.occupancy_map.resolution);
+    }
     node_ = next;
+    dirty_ = true;  // the grid's band may have changed
   }
 
   void onEstimate(const unsup_mvs::DepthEstimateConstPtr& msg) {
@@ -183,9 +171,11 @@ class FusionNodelet : public nodelet::Nodelet {
       // which estimates it includes even when the last one added no point.
       last_stamp_ = msg->header.stamp;
       dirty_ = true;
-      NODELET_INFO_THROTTLE(2.0, "fusion: depth estimate %u added %zu points in %.2f s; %zu points from %ld estimates",
+      NODELET_INFO_THROTTLE(2.0,
+                            "fusion: depth estimate %u added %zu points in %.2f s; %zu points from %ld estimates, "
+                            "%ld cleared as free space",
                             msg->keyframe_id, added.size(), (ros::WallTime::now() - t0).toSec(), fusion_->cloud().size(),
-                            estimates_);
+                            estimates_, static_cast<long>(fusion_->points_cleared()));
     } catch (const std::exception& e) {
       NODELET_ERROR_THROTTLE(2.0, "fusion: depth estimate %u skipped: %s", msg->keyframe_id, e.what());
     }

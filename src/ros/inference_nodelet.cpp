@@ -33,6 +33,7 @@
 #include "unsup_mvs/io/input_limits.h"
 #include "unsup_mvs/io/plane_count.h"
 #include "unsup_mvs/ros/nodelets.h"
+#include "unsup_mvs/ros/live_settings.h"
 #include "unsup_mvs/ros/params.h"
 #include "unsup_mvs/ros/reconfigure.h"
 
@@ -53,26 +54,6 @@ umvs::ViewInput view_from_msg(const sensor_msgs::Image& image, const sensor_msgs
   } catch (const std::exception& e) {
     throw std::invalid_argument(name + ": " + e.what());
   }
-}
-
-// The live-tunable network settings (cfg/Inference.cfg), both ways.
-unsup_mvs::InferenceConfig to_reconfigure(const InferenceNodeConfig& c) {
-  unsup_mvs::InferenceConfig r = unsup_mvs::InferenceConfig::__getDefault__();
-  r.max_width = c.estimator.max_width;
-  r.max_height = c.estimator.max_height;
-  r.num_depth = c.estimator.num_depth;
-  r.pose_refinement_deg = c.pose_refinement_deg;
-  r.depth_camera_min_confidence = c.depth_camera_min_confidence;
-  return r;
-}
-
-InferenceNodeConfig with_reconfigure(InferenceNodeConfig c, const unsup_mvs::InferenceConfig& r) {
-  c.estimator.max_width = r.max_width;
-  c.estimator.max_height = r.max_height;
-  c.estimator.num_depth = r.num_depth;
-  c.pose_refinement_deg = r.pose_refinement_deg;
-  c.depth_camera_min_confidence = r.depth_camera_min_confidence;
-  return c;
 }
 
 bool same_settings(const umvs::DepthEstimatorConfig& a, const umvs::DepthEstimatorConfig& b) {

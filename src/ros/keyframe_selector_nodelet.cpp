@@ -31,46 +31,11 @@
 #include "unsup_mvs/core/view_selection.h"
 #include "unsup_mvs/io/ros/ros_conversions.h"
 #include "unsup_mvs/ros/nodelets.h"
+#include "unsup_mvs/ros/live_settings.h"
 #include "unsup_mvs/ros/params.h"
 #include "unsup_mvs/ros/reconfigure.h"
 
 namespace umvs_ros {
-
-namespace {
-
-// The live-tunable part of the stream config (cfg/KeyframeSelector.cfg), both ways.
-unsup_mvs::KeyframeSelectorConfig to_reconfigure(const umvs::KeyframeStreamConfig& c) {
-  unsup_mvs::KeyframeSelectorConfig r = unsup_mvs::KeyframeSelectorConfig::__getDefault__();
-  r.min_translation = c.keyframes.min_translation;
-  r.min_rotation_deg = c.keyframes.min_rotation_deg;
-  r.min_pose_distance = c.keyframes.min_pose_distance;
-  r.buffer_size = c.keyframes.buffer_size;
-  r.num_sources = c.keyframes.num_sources;
-  r.lookahead = c.keyframes.lookahead;
-  r.max_wait_s = c.keyframes.max_wait_s;
-  r.min_view_score = c.keyframes.min_score;
-  r.view_score_grid = c.keyframes.score_grid;
-  r.depth_min = c.depth_min;
-  r.depth_max = c.depth_max;
-  return r;
-}
-
-umvs::KeyframeStreamConfig with_reconfigure(umvs::KeyframeStreamConfig c, const unsup_mvs::KeyframeSelectorConfig& r) {
-  c.keyframes.min_translation = r.min_translation;
-  c.keyframes.min_rotation_deg = r.min_rotation_deg;
-  c.keyframes.min_pose_distance = r.min_pose_distance;
-  c.keyframes.buffer_size = r.buffer_size;
-  c.keyframes.num_sources = r.num_sources;
-  c.keyframes.lookahead = r.lookahead;
-  c.keyframes.max_wait_s = r.max_wait_s;
-  c.keyframes.min_score = r.min_view_score;
-  c.keyframes.score_grid = r.view_score_grid;
-  c.depth_min = r.depth_min;
-  c.depth_max = r.depth_max;
-  return c;
-}
-
-}  // namespace
 
 class KeyframeSelectorNodelet : public nodelet::Nodelet {
  public:

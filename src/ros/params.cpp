@@ -52,6 +52,8 @@ umvs::FusionConfig fusion_config_from_ros(const ros::NodeHandle& nh) {
   nh.param("max_relative_depth", c.max_relative_depth, c.max_relative_depth);
   nh.param("min_agreeing_views", c.min_agreeing_views, c.min_agreeing_views);
   nh.param("voxel_size", c.voxel_size, c.voxel_size);
+  nh.param("clear_after_views", c.clear_after_views, c.clear_after_views);
+  nh.param("clear_margin", c.clear_margin, c.clear_margin);
   std::string rule = umvs::to_string(c.source_rule);
   nh.param("source_rule", rule, rule);
   c.source_rule = umvs::fusion_source_rule_from_string(rule);

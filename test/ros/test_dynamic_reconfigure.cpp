@@ -13,6 +13,7 @@
 #include <cmath>
 #include <limits>
 
+#include "reconfigure_client.h"
 #include "rostest_util.h"
 #include "test_messages.h"
 #include "unsup_mvs/DepthEstimate.h"
@@ -21,43 +22,16 @@
 #include "unsup_mvs/ResetFusion.h"
 #include "unsup_mvs/io/checkpoint.h"
 #include "unsup_mvs/io/ros/ros_conversions.h"
+#include "unsup_mvs/ros/live_settings.h"
 #include "unsup_mvs/ros/params.h"
+#include "unsup_mvs/ros/reconfigure.h"
 
 namespace {
 
 using umvs_test::wait_for;
 
-// --- dynamic_reconfigure requests ------------------------------------------------------------
-
-struct Request {
-  dynamic_reconfigure::Config config;
-  Request& set(const std::string& name, double value) {
-    dynamic_reconfigure::DoubleParameter p;
-    p.name = name;
-    p.value = value;
-    config.doubles.push_back(p);
-    return *this;
-  }
-  Request& set(const std::string& name, int value) {
-    dynamic_reconfigure::IntParameter p;
-    p.name = name;
-    p.value = value;
-    config.ints.push_back(p);
-    return *this;
-  }
-};
-
-// Calls <node>/set_parameters and returns the config the node reports back (an empty request
-// just reads it).
-dynamic_reconfigure::Config reconfigure(const std::string& node, const Request& request = {}) {
-  ros::NodeHandle nh;
-  ros::ServiceClient client = nh.serviceClient<dynamic_reconfigure::Reconfigure>(node + "/set_parameters");
-  EXPECT_TRUE(client.waitForExistence(ros::Duration(30.0))) << node << " offers no set_parameters";
-  dynamic_reconfigure::Reconfigure srv;
-  srv.request.config = request.config;
-  EXPECT_TRUE(client.call(srv)) << node << "/set_parameters failed";
-  return srv.response.config;
-}
+using umvs_test::reconfigure;
+using umvs_test::Request;
 
 double double_of(const dynamic_reconfigure::Config& c, const std::string& name) {
   for (const auto& p : c.doubles) {
@@ -335,6 +309,26 @@ TEST(InferenceDefaults, CodeAndYamlRecommendTheSameInference) {
 }
 
 }  // namespace
+
+// One default per setting: the cfg's defaults, as the generated config reports them, against the
+// config structs' defaults mapped by the nodes' own live_settings.
+template <typename Generated>
+std::string cfg_differences(const Generated& from_structs) {
+  dynamic_reconfigure::Config cfg, structs;
+  Generated::__getDefault__().__toMessage__(cfg);
+  from_structs.__toMessage__(structs);
+  return umvs_ros::describe_changes(cfg, structs);
+}
+
+TEST(LiveSettings, TheCfgDefaultsAreTheConfigStructs) {
+  EXPECT_EQ(cfg_differences(umvs_ros::to_reconfigure(umvs_ros::FusionNodeConfig{})), "") << "cfg/Fusion.cfg";
+  EXPECT_EQ(cfg_differences(umvs_ros::to_reconfigure(umvs_ros::InferenceNodeConfig{})), "") << "cfg/Inference.cfg";
+  EXPECT_EQ(cfg_differences(umvs_ros::to_reconfigure(umvs::KeyframeStreamConfig{})), "") << "cfg/KeyframeSelector.cfg";
+  // The comparison sees a difference when there is one.
+  auto fusion = umvs_ros::FusionNodeConfig{};
+  fusion.fusion.clear_after_views += 1;
+  EXPECT_NE(cfg_differences(umvs_ros::to_reconfigure(fusion)).find("clear_after_views"), std::string::npos);
+}
 
 int main(int argc, char** argv) {
   testing::InitGoogleTest(&argc, argv);

@@ -1,7 +1,8 @@
 // rostest for the fusion node: depth estimates of a plane seen by cameras moving along x become a
 // PointCloud2 on the plane (frame, stamp, PCL fields checked); save_cloud writes a PLY and a PCD
 // that PCL opens, with the same points, refuses other extensions and never replaces a good file
-// with nothing; reset clears; bad estimates (another world frame, NaN pose, wrong depth encoding)
+// with nothing; reset clears; an object that leaves is removed from the cloud and the grid
+// while the plane behind it keeps its points; bad estimates (another world frame, NaN pose, wrong depth encoding)
 // are logged and skipped.
 #include <nav_msgs/OccupancyGrid.h>
 #include <octomap/OcTree.h>
@@ -13,7 +14,10 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <set>
+#include <tuple>
 
+#include "reconfigure_client.h"
 #include "rostest_util.h"
 #include "test_messages.h"
 #include "unsup_mvs/DepthEstimate.h"
@@ -27,6 +31,8 @@ namespace {
 
 using umvs_test::wait_for;
 using umvs_test::kPlaneZ;
+using umvs_test::reconfigure;
+using umvs_test::Request;
 
 // Red, so that the cloud's colour can be checked.
 unsup_mvs::DepthEstimate make_estimate(uint32_t id, double x) {
@@ -211,6 +217,77 @@ TEST_F(FusionTest, OccupancyGridAndOctoMap) {
     EXPECT_NE(srv.response.message.find("refused"), std::string::npos) << srv.response.message;
   }
   EXPECT_FALSE(std::filesystem::exists(dir_ + "/plane.ply"));
+}
+
+// The plane seen with a 0.4 x 0.4 m square 1 m in front of it (world z = 2, centred on x = y = 0).
+unsup_mvs::DepthEstimate estimate_with_object(uint32_t id, double x) {
+  auto e = make_estimate(id, x);
+  constexpr double kObjectZ = kPlaneZ - 1.0;
+  auto depth = torch::full({umvs_test::kPlaneHeight, umvs_test::kPlaneWidth}, static_cast<float>(kPlaneZ));
+  auto d = depth.accessor<float, 2>();
+  for (int v = 0; v < umvs_test::kPlaneHeight; ++v) {
+    for (int u = 0; u < umvs_test::kPlaneWidth; ++u) {
+      const double X = x + (u - (umvs_test::kPlaneWidth - 1) / 2.0) * kObjectZ / umvs_test::kPlaneFocal;
+      const double Y = (v - (umvs_test::kPlaneHeight - 1) / 2.0) * kObjectZ / umvs_test::kPlaneFocal;
+      if (std::abs(X) <= 0.2 && std::abs(Y) <= 0.2) d[v][u] = static_cast<float>(kObjectZ);
+    }
+  }
+  e.depth = umvs::float_to_image_msg(depth, e.header);
+  return e;
+}
+
+TEST_F(FusionTest, AnObjectThatLeavesIsRemovedFromTheCloudAndTheGrid) {
+  umvs_test::RosoutCapture log(nh_);
+  nav_msgs::OccupancyGridConstPtr grid;
+  ros::Subscriber grid_sub = nh_.subscribe<nav_msgs::OccupancyGrid>(
+      "/occupancy_grid", 5, [&](const nav_msgs::OccupancyGridConstPtr& m) { grid = m; });
+  // Live: the grid's height band around the object, and a ray through every pixel so that each of
+  // the object's 5 cm cells is crossed in every later look (restored at the end).
+  reconfigure("/fusion", Request().set("occupancy_grid_min_z", 1.9).set("occupancy_grid_max_z", 2.1).set(
+                             "occupancy_pixel_stride", 1));
+  auto occupied_cells = [&] { return std::count(grid->data.begin(), grid->data.end(), int8_t{100}); };
+  using Point = std::tuple<float, float, float>;
+  auto points = [&](bool object) {
+    std::set<Point> out;
+    sensor_msgs::PointCloud2ConstIterator<float> x(*cloud_, "x"), y(*cloud_, "y"), z(*cloud_, "z");
+    for (size_t i = 0; i < cloud_->width * cloud_->height; ++i, ++x, ++y, ++z) {
+      if ((*z < kPlaneZ - 0.5) == object) out.insert({*x, *y, *z});
+    }
+    return out;
+  };
+  auto replay = [&](uint32_t first_id, int count, bool with_object) {
+    ros::Time last;
+    for (int i = 0; i < count; ++i) {
+      const double x = 0.1 * (i % 5);  // the cameras' path, again and again
+      const auto e = with_object ? estimate_with_object(first_id + i, x) : make_estimate(first_id + i, x);
+      last = e.header.stamp;
+      estimate_pub_.publish(e);
+      ros::WallDuration(0.1).sleep();
+    }
+    ASSERT_TRUE(wait_for([&] { return cloud_ && cloud_->header.stamp == last && grid && grid->header.stamp == last; },
+                         20.0))
+        << log.all();
+  };
+  replay(40, 5, true);
+  const auto plane = points(false);
+  const size_t object_points = points(true).size();
+  const long object_cells = occupied_cells();
+  EXPECT_GT(object_points, 50u) << "the object is in the cloud";
+  EXPECT_GT(object_cells, 20) << "the object is in the grid";
+
+  // It has gone: three more passes. An occupied cell at octomap's clamp needs nine rays through it.
+  replay(60, 15, false);
+  size_t plane_kept = 0;
+  for (const auto& p : points(false)) plane_kept += plane.count(p);
+  std::printf("[ figures  ] object: %zu points, %ld grid cells; after three passes without it %zu and %ld; the plane "
+              "kept %zu of its %zu points\n",
+              object_points, object_cells, points(true).size(), static_cast<long>(occupied_cells()), plane_kept,
+              plane.size());
+  EXPECT_EQ(points(true).size(), 0u);
+  EXPECT_EQ(occupied_cells(), 0);
+  EXPECT_GE(static_cast<double>(plane_kept), 0.99 * plane.size());
+  reconfigure("/fusion", Request().set("occupancy_grid_min_z", 2.8).set("occupancy_grid_max_z", 3.2).set(
+                             "occupancy_pixel_stride", 2));
 }
 
 TEST_F(FusionTest, BadEstimatesAreLoggedAndSkipped) {
