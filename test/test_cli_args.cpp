@@ -91,6 +91,25 @@ TEST(CliErrors, BadArgumentsAreRefusedOnStderrNamingTheOption) {
   EXPECT_FALSE(fs::exists(out)) << "a refused call created its output folder";
 }
 
+TEST(CliErrors, TheMessageNamesTheRealProblem) {
+  const std::string data = test::scene("cli_errors_data");
+  struct Case {
+    std::string args, says;
+  };
+  for (const auto& c : {
+           // A misspelt option is named (with what it resembles), not the required one it hides.
+           Case{"infer --dta x --out o", "unknown option --dta (did you mean --data?)"},
+           Case{"fuse --depth d --out o.ply --threads abc", "needs an integer, got 'abc'"},
+           Case{"fuse --depth d --out o.ply --min-confidence high", "needs a number, got 'high'"},
+           Case{"infer --data " + data + " --checkpoint none.pt --ref 99 --out " + test::temp_dir("cli_errors") + "/infer",
+                "view 99 is not in " + data + "/pair.txt"},
+       }) {
+    const Result r = run_umvs(c.args, kOnlyStderr);
+    EXPECT_EQ(r.status, 2) << c.args << ": " << r.output;
+    EXPECT_TRUE(contains(r.output, c.says)) << c.args << ": " << r.output;
+  }
+}
+
 TEST(CliJson, BenchPrintsOneJsonObjectThatParses) {
   const Result r =
       run_umvs("bench --case fusion --width=32 --height 24 --sources 1 --runs 2 --warmup 0 --threads 1 --json", kOnlyStdout);

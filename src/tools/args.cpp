@@ -3,6 +3,8 @@
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
+#include <cerrno>
+#include <climits>
 #include <cstdlib>
 #include <iostream>
 #include <sstream>
@@ -20,6 +22,30 @@ bool is_number(const std::string& text) {
   return end == text.c_str() + text.size();
 }
 
+bool is_integer(const std::string& text) {
+  if (text.empty()) return false;
+  char* end = nullptr;
+  errno = 0;
+  const long v = std::strtol(text.c_str(), &end, 10);
+  return end == text.c_str() + text.size() && errno == 0 && v >= INT_MIN && v <= INT_MAX;
+}
+
+// Levenshtein distance, for "did you mean".
+size_t edit_distance(const std::string& a, const std::string& b) {
+  std::vector<size_t> row(b.size() + 1);
+  for (size_t j = 0; j <= b.size(); ++j) row[j] = j;
+  for (size_t i = 1; i <= a.size(); ++i) {
+    size_t diagonal = row[0];
+    row[0] = i;
+    for (size_t j = 1; j <= b.size(); ++j) {
+      const size_t above = row[j];
+      row[j] = std::min({row[j] + 1, row[j - 1] + 1, diagonal + (a[i - 1] == b[j - 1] ? 0 : 1)});
+      diagonal = above;
+    }
+  }
+  return row[b.size()];
+}
+
 }  // namespace
 
 Args::Args(std::string command, std::string description)
@@ -30,22 +56,37 @@ Args::~Args() = default;
 Args::Args(Args&&) noexcept = default;
 Args& Args::operator=(Args&&) noexcept = default;
 
-Args& Args::option(const std::string& name, const std::string& def, const std::string& help) {
+Args& Args::declare(const std::string& name, const std::string& def, const std::string& help, Kind kind) {
   CLI::Option* opt = app_->add_option("--" + name, values_[name], help)
                          ->expected(1)
                          ->allow_extra_args(false)  // one value per occurrence
                          ->multi_option_policy(CLI::MultiOptionPolicy::TakeLast);
   if (!def.empty()) opt->default_str(def);
-  if (is_number(def)) opt->check(CLI::Validator(CLI::Number).description(""))->type_name("NUMBER");
-  else opt->type_name("TEXT");
+  if (kind == Kind::kInteger) {
+    opt->check(CLI::Validator(
+                   [](std::string& v) { return is_integer(v) ? std::string() : "needs an integer, got '" + v + "'"; }, ""))
+        ->type_name("INT");
+  } else if (kind == Kind::kNumber) {
+    opt->check(CLI::Validator(
+                   [](std::string& v) { return is_number(v) ? std::string() : "needs a number, got '" + v + "'"; }, ""))
+        ->type_name("NUMBER");
+  } else {
+    opt->type_name("TEXT");
+  }
   defaults_[name] = def;
   order_.push_back(name);
   return *this;
 }
+Args& Args::option(const std::string& name, const std::string& def, const std::string& help) {
+  return declare(name, def, help, is_number(def) ? Kind::kNumber : Kind::kText);
+}
 Args& Args::option(const std::string& name, double def, const std::string& help) {
   std::ostringstream text;
   text << def;
-  return option(name, text.str(), help);
+  return declare(name, text.str(), help, Kind::kNumber);
+}
+Args& Args::option(const std::string& name, int def, const std::string& help) {
+  return declare(name, std::to_string(def), help, Kind::kInteger);
 }
 Args& Args::flag(const std::string& name, const std::string& help) {
   app_->add_flag("--" + name, flags_[name], help);
@@ -64,8 +105,25 @@ Args& Args::repeated(const std::string& name, const std::string& help) {
   return *this;
 }
 
+void Args::check_known_options(const std::vector<std::string>& args) const {
+  for (const auto& a : args) {
+    if (a.size() < 3 || a.compare(0, 2, "--") != 0) continue;
+    const std::string name = a.substr(2, a.find('=') == std::string::npos ? std::string::npos : a.find('=') - 2);
+    if (name == "help" || defaults_.count(name)) continue;
+    std::string closest;
+    size_t best = 3;  // suggest only names at most two edits away
+    for (const auto& known : order_) {
+      const size_t d = edit_distance(name, known);
+      if (d < best) best = d, closest = known;
+    }
+    throw std::invalid_argument("unknown option --" + name + (closest.empty() ? "" : " (did you mean --" + closest + "?)") +
+                                " (see " + app_->get_name() + " --help)");
+  }
+}
+
 bool Args::parse(int argc, char** argv) {
   std::vector<std::string> args(argv, argv + argc);
+  check_known_options(args);
   std::reverse(args.begin(), args.end());  // CLI11 takes them last first
   try {
     app_->parse(args);

@@ -160,7 +160,7 @@ UMVS_COMMAND(bench, "time and memory of the network on synthetic input") {
       .option("num-depth", "128", "depth hypotheses")
       .option("views", "3", "views per depth map")
       .option("sources", "10", "fusion: source views per reference")
-      .option("threads", "2", "CPU threads")
+      .option("threads", 2, "CPU threads")
       .option("device", "cpu", "cpu | cuda")
       .option("runs", "5", "timed runs (>= 5 recommended)")
       .option("warmup", "1", "untimed runs first")

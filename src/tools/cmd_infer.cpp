@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <iostream>
 #include <map>
+#include <set>
 #include <sstream>
 
 #include "unsup_mvs/core/depth_completion.h"
@@ -85,7 +86,7 @@ UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
       .option("depth-max", "0", "override the far end of the depth range (0 = from the cam file)")
       .option("ref", "", "comma-separated reference view ids (default: all in pair.txt)")
       .option("device", "cpu", "cpu | cuda | cuda:N")
-      .option("threads", "0", "CPU threads (0 = all cores)");
+      .option("threads", 0, "CPU threads (0 = all cores)");
   if (!args.parse(argc, argv)) return 0;
 
   umvs::configure_threads(args.integer("threads"));
@@ -99,6 +100,18 @@ UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
                                 args.str("depth-min"));
   }
   umvs::MvsFolder folder(args.str("data"));
+  std::vector<int> refs = args.integers("ref");
+  std::set<int> in_pairs;
+  for (const auto& p : folder.pairs()) in_pairs.insert(p.ref);
+  for (int ref : refs) {
+    if (!in_pairs.count(ref)) {
+      throw std::invalid_argument("--ref: view " + std::to_string(ref) + " is not in " + args.str("data") +
+                                  "/pair.txt (it lists " + std::to_string(in_pairs.size()) + " reference views)");
+    }
+  }
+  if (refs.empty()) {
+    for (const auto& p : folder.pairs()) refs.push_back(p.ref);
+  }
 
   auto loaded = umvs::load_model(args.str("checkpoint"), device);
   if (args.given("depth-sampling")) loaded.model->set_depth_sampling(umvs::depth_sampling_from_string(args.str("depth-sampling")));
@@ -119,10 +132,6 @@ UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
                                 args.str("source-rotation-search"));
   }
 
-  std::vector<int> refs = args.integers("ref");
-  if (refs.empty()) {
-    for (const auto& p : folder.pairs()) refs.push_back(p.ref);
-  }
   std::map<int, umvs::MvsView> cache;
   auto view = [&](int id) -> const umvs::MvsView& {
     auto it = cache.find(id);

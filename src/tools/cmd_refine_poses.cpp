@@ -42,7 +42,7 @@ int refine_poses(int argc, char** argv) {
       .option("max-width", "0", "scale images down to at most this width (0 = keep)")
       .option("max-height", "0", "scale images down to at most this height (0 = keep)")
       .option("device", "cpu", "cpu | cuda | cuda:N")
-      .option("threads", "0", "CPU threads (0 = all cores)");
+      .option("threads", 0, "CPU threads (0 = all cores)");
   if (!args.parse(argc, argv)) return 0;
 
   umvs::configure_threads(args.integer("threads"));

@@ -44,7 +44,7 @@ UMVS_COMMAND(synth, "render a synthetic scene with exact ground truth (depth, gt
       .option("texture-size", "512", "photographs are shrunk to at most this many pixels on their longest side")
       .option("supersample", "2", "anti-aliasing rays per pixel along each axis")
       .option("gt-samples", "300000", "area samples for gt.ply before visibility culling (0 = no gt.ply)")
-      .option("threads", "0", "CPU threads (0 = all cores)");
+      .option("threads", 0, "CPU threads (0 = all cores)");
   if (!args.parse(argc, argv)) return 0;
   umvs::configure_threads(args.integer("threads"));
 

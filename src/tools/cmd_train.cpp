@@ -380,7 +380,7 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
       .option("jitter", "0.1", "photometric jitter strength")
       .option("seed", "1", "seed of the initial weights and of the data order")
       .option("device", "cpu", "cpu | cuda | cuda:N")
-      .option("threads", "0", "CPU threads (0 = all cores)")
+      .option("threads", 0, "CPU threads (0 = all cores)")
       .option("nproc", "1", "data-parallel: start this many local ranks of this command (docs/training.md)")
       .option("world-size", "", "data-parallel: ranks in the job (default: $WORLD_SIZE, else 1)")
       .option("rank", "", "data-parallel: this process's rank (default: $RANK, else 0)")

@@ -30,13 +30,16 @@ class Args {
   // A numeric default, usually a Config struct's own field, so that the command line and the
   // library cannot disagree on it.
   Args& option(const std::string& name, double default_value, const std::string& help);
+  // An integer default: the option only takes integers ("--threads abc" is refused as such).
+  Args& option(const std::string& name, int default_value, const std::string& help);
   Args& flag(const std::string& name, const std::string& help);
   Args& required(const std::string& name, const std::string& help);
   // An option that may be given several times (e.g. --bag a.bag --bag b.bag).
   Args& repeated(const std::string& name, const std::string& help);
 
   // Returns false when --help was given (usage already printed). Throws std::invalid_argument
-  // with a message naming the offending option otherwise.
+  // with a message naming the offending option otherwise; an unknown option is reported first
+  // (with the declared one it most resembles), before any missing one.
   bool parse(int argc, char** argv);
 
   std::string str(const std::string& name) const;
@@ -53,6 +56,9 @@ class Args {
  private:
   std::unique_ptr<CLI::App> app_;
   std::vector<std::string> order_;
+  enum class Kind { kText, kNumber, kInteger };
+  Args& declare(const std::string& name, const std::string& default_value, const std::string& help, Kind kind);
+  void check_known_options(const std::vector<std::string>& args) const;
   std::map<std::string, std::string> defaults_;
   // CLI11 writes into these (std::map keeps their addresses while options are added).
   std::map<std::string, std::vector<std::string>> values_;
