@@ -66,6 +66,10 @@ inline std::map<std::string, std::string> snapshot(const std::string& dir) {
 }
 
 // A small synthetic room as an MVSNet folder (exact depth in depth_gt/), written once per name.
+// The smallest training run the command-line tests use (add --data, --steps, --out).
+inline const std::string kTrainFlags =
+    " --width 96 --height 64 --num-depth 8 --views-loss 3 --top-k 2 --threads 1 --save-every 2";
+
 inline std::string scene(const std::string& name, int width = 96, int height = 64, int views = 5) {
   const std::string dir = temp_dir(name);
   SynthConfig cfg;

@@ -13,6 +13,7 @@
 #include "unsup_mvs/core/memory_bounds.h"
 #include "unsup_mvs/core/weight_blend.h"
 #include "unsup_mvs/io/atomic_file.h"
+#include "unsup_mvs/io/file_safety.h"
 #include "unsup_mvs/io/checkpoint.h"
 #include "unsup_mvs/io/image_io.h"
 #include "unsup_mvs/io/loss_curve.h"
@@ -244,7 +245,7 @@ TrainingRun::TrainingRun(TrainingRunConfig config, const std::function<TrainingD
 
 TrainingRun::~TrainingRun() = default;
 
-void TrainingRun::checkpoint(TrainLogRow& row) {
+void TrainingRun::checkpoint(TrainLogRow& row, std::ostream* log) {
   double score = interval_count_ > 0 ? interval_loss_ / interval_count_ : INFINITY;
   bool ground_truth = false;
   if (group_) {  // one model on every rank: the BatchNorm running averages of all ranks
@@ -283,6 +284,9 @@ void TrainingRun::checkpoint(TrainLogRow& row) {
   if (row.val_total) m.metrics["val_total"] = *row.val_total;
   if (row.val_abs_err) m.metrics["val_abs_err"] = *row.val_abs_err;
   if (!writes_files()) return;
+  // The row first: killed at any moment, the log holds at least every step up to last.pt's (a
+  // resume drops the rows after it), never fewer.
+  if (log) *log << format_csv_row(row) << "\n" << std::flush;
   save_checkpoint(last_path(), trainer_->model(), m);
   if (improved) save_checkpoint(best_path(), trainer_->model(), m);
 }
@@ -403,6 +407,7 @@ TrainingRun::Result TrainingRun::run(
     // Everything is checked: from here on OUT changes.
     make_directories(out);
     if (config_.start == RunStart::kOverwrite) remove_run_files(out);
+    remove_stale_temp_files(out);  // what a killed run was writing (its last complete files stay)
     write_run_config(out + "/" + kRunConfigFile, config_.options);
     // The log holds exactly the rows up to the starting step.
     write_file_atomically(log_path(), [&](std::ostream& os) {
@@ -481,8 +486,11 @@ TrainingRun::Result TrainingRun::run(
       interval_loss_ += loss.total;
       ++interval_count_;
     }
-    if (step_ % config_.save_every == 0 || step_ == config_.steps || result.out_of_time) checkpoint(row);
-    if (writes_files()) log << format_csv_row(row) << "\n" << std::flush;
+    if (step_ % config_.save_every == 0 || step_ == config_.steps || result.out_of_time) {
+      checkpoint(row, &log);
+    } else if (writes_files()) {
+      log << format_csv_row(row) << "\n" << std::flush;
+    }
     history_.push_back(row);
     if (writes_files() && (row.val_total || step_ == config_.steps || result.out_of_time)) write_curve();
     if (on_step) on_step(row, step_ - first, to_do);

@@ -105,7 +105,9 @@ class TrainingRun {
   std::string blended_path() const { return config_.out + "/blended.pt"; }
 
  private:
-  void checkpoint(TrainLogRow& row);
+  // Scores the model (validation fills `row`), appends `row` to `log` (when given), then saves
+  // last.pt and, when it improved, best.pt.
+  void checkpoint(TrainLogRow& row, std::ostream* log = nullptr);
   Evaluation validate();                        // on val_tuples_, shared out over the ranks
   std::vector<TrainingTuple> next_tuples();     // this rank's share of the next step
   void label_round(MvsNet& labeller);
