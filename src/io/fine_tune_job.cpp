@@ -8,6 +8,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "unsup_mvs/core/device.h"
 #include "unsup_mvs/io/file_safety.h"
 #include "unsup_mvs/io/run_folder.h"
 
@@ -56,8 +57,9 @@ void FineTuneConfig::validate() const {
   if (!(fine_tuned_share > 0 && fine_tuned_share <= 1)) {
     throw std::invalid_argument("fine_tuned_share must be in (0, 1] (1 = no blend), got " + number(fine_tuned_share));
   }
+  parse_device(device);  // throws naming the device
   // The job sets these itself for every training and evaluation run.
-  for (const char* reserved : {"--bag", "--data", "--init", "--steps", "--out", "--eval-only", "--fine-tuned-share"}) {
+  for (const char* reserved : {"--bag", "--data", "--init", "--steps", "--out", "--eval-only", "--fine-tuned-share", "--device"}) {
     if (std::find(train_args.begin(), train_args.end(), reserved) != train_args.end()) {
       throw std::invalid_argument(std::string("train_args must not set ") + reserved + ": every job sets it");
     }
@@ -151,7 +153,7 @@ std::vector<std::string> FineTuneJob::data_args() const {
     args.push_back(b);
   }
   args.insert(args.end(), {"--image-topic", config_.image_topic, "--camera-info-topic", config_.camera_info_topic,
-                           "--world-frame", config_.world_frame});
+                           "--world-frame", config_.world_frame, "--device", config_.device});
   const auto stream_args = keyframe_stream_train_args(config_.keyframes);
   args.insert(args.end(), stream_args.begin(), stream_args.end());
   args.insert(args.end(), config_.train_args.begin(), config_.train_args.end());

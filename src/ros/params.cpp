@@ -191,6 +191,7 @@ umvs::FineTuneConfig fine_tune_config_from_ros(const ros::NodeHandle& nh) {
   nh.param("image_topic", c.image_topic, c.image_topic);
   nh.param("camera_info_topic", c.camera_info_topic, c.camera_info_topic);
   nh.param("world_frame", c.world_frame, c.world_frame);
+  nh.param("device", c.device, c.device);
   nh.param("steps", c.default_steps, c.default_steps);
   nh.param("train_args", c.train_args, c.train_args);
   nh.param("local_ranks", c.local_ranks, c.local_ranks);

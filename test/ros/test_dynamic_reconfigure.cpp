@@ -12,6 +12,9 @@
 
 #include <cmath>
 #include <limits>
+#include <set>
+#include <string>
+#include <vector>
 
 #include "reconfigure_client.h"
 #include "rostest_util.h"
@@ -294,18 +297,42 @@ TEST(InferenceReconfigureTest, ResolutionPlanesAndPoseRefinementTakeEffectAndBad
   EXPECT_TRUE(wait_for([&] { return planes == "24"; }, 10.0)) << planes;  // 128 wide
 }
 
-// The inference node started without config/inference.yaml (as "/i/inference" above) and with it
-// (the launch files) serves the same depth: `umvs infer`'s (auto sources, completed below
-// confidence 0.7).
-TEST(InferenceDefaults, CodeAndYamlRecommendTheSameInference) {
-  const auto without_yaml = umvs_ros::inference_node_config_from_ros(ros::NodeHandle("/no_parameters_here"));
-  EXPECT_EQ(without_yaml.estimator.source_combination, umvs::kRecommendedSourceCombination);
-  EXPECT_DOUBLE_EQ(without_yaml.estimator.completion.min_confidence, umvs::kRecommendedCompletionConfidence);
-  ros::NodeHandle yaml_ns("/inference_yaml");
-  ASSERT_TRUE(yaml_ns.hasParam("source_combination")) << "dynamic_reconfigure.test loads config/inference.yaml here";
-  const auto with_yaml = umvs_ros::inference_node_config_from_ros(yaml_ns);
-  EXPECT_EQ(with_yaml.estimator.source_combination, without_yaml.estimator.source_combination);
-  EXPECT_DOUBLE_EQ(with_yaml.estimator.completion.min_confidence, without_yaml.estimator.completion.min_confidence);
+// The parameter names under `ns` (the keys of a YAML the test launch file loaded there).
+std::set<std::string> keys_under(const std::string& ns) {
+  std::vector<std::string> all;
+  ros::NodeHandle().getParamNames(all);
+  std::set<std::string> keys;
+  for (const auto& name : all) {
+    if (name.rfind(ns + "/", 0) == 0) keys.insert(name.substr(ns.size() + 1));
+  }
+  return keys;
+}
+
+// config/*.yaml say only what differs from the code's defaults, and parse into valid configs (as
+// the launch files load them); without them the nodes serve `umvs infer`'s inference.
+TEST(ConfigFiles, TheYamlsParseAndSayOnlyWhatDiffersFromTheDefaults) {
+  const auto fusion = umvs_ros::fusion_node_config_from_ros(ros::NodeHandle("/yaml/fusion"));
+  const umvs::FusionConfig fusion_defaults;
+  EXPECT_EQ(keys_under("/yaml/fusion"), (std::set<std::string>{"voxel_size", "min_confidence", "min_agreeing_views"}));
+  EXPECT_NE(fusion.fusion.voxel_size, fusion_defaults.voxel_size);
+  EXPECT_NE(fusion.fusion.min_confidence, fusion_defaults.min_confidence);
+  EXPECT_NE(fusion.fusion.min_agreeing_views, fusion_defaults.min_agreeing_views);
+
+  const auto inference = umvs_ros::inference_node_config_from_ros(ros::NodeHandle("/yaml/inference"));
+  const umvs_ros::InferenceNodeConfig inference_defaults;
+  EXPECT_EQ(keys_under("/yaml/inference"), (std::set<std::string>{"max_width", "max_height"}));
+  EXPECT_NE(inference.estimator.max_width, inference_defaults.estimator.max_width);
+  EXPECT_NE(inference.estimator.max_height, inference_defaults.estimator.max_height);
+  EXPECT_EQ(inference_defaults.estimator.source_combination, umvs::kRecommendedSourceCombination);
+  EXPECT_DOUBLE_EQ(inference_defaults.estimator.completion.min_confidence, umvs::kRecommendedCompletionConfidence);
+
+  umvs_ros::keyframe_stream_config_from_ros(ros::NodeHandle("/yaml/keyframe_selector"));
+  EXPECT_EQ(keys_under("/yaml/keyframe_selector"), std::set<std::string>{});
+
+  const auto trainer = umvs_ros::trainer_node_config_from_ros(ros::NodeHandle("/yaml/trainer"));
+  EXPECT_EQ(keys_under("/yaml/trainer"), (std::set<std::string>{"train_args"}));
+  EXPECT_FALSE(trainer.job.train_args.empty());
+  EXPECT_TRUE(umvs::FineTuneConfig{}.train_args.empty());
 }
 
 }  // namespace

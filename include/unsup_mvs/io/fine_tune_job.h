@@ -32,6 +32,7 @@ struct FineTuneConfig {
   std::string image_topic = "/camera/image_rect_color";  // topics and frame inside the bags
   std::string camera_info_topic = "/camera/camera_info";
   std::string world_frame = "world";
+  std::string device = "cpu";           // where jobs train and evaluate: cpu | cuda | cuda:N (umvs train --device)
   int default_steps = 500;              // steps of a request that gives 0
   std::vector<std::string> train_args;  // extra `umvs train` arguments (size, planes, held-out share)
   int local_ranks = 1;  // each training job as this many data-parallel ranks on this machine (--nproc)
