@@ -195,6 +195,12 @@ TEST(FineTuneConfig, ValidateNamesTheBadField) {
   bad.train_args = {"--fine-tuned-share", "0.5"};
   EXPECT_THAT([&] { bad.validate(); }, ThrowsMessage<std::invalid_argument>(HasSubstr("train_args must not set --fine-tuned-share")));
   bad = c;
+  bad.train_args = {"--device", "cuda"};  // the trainer's ~device (the launch file's device) says where jobs run
+  EXPECT_THAT([&] { bad.validate(); }, ThrowsMessage<std::invalid_argument>(HasSubstr("train_args must not set --device")));
+  bad = c;
+  bad.device = "gpu7";
+  EXPECT_THAT([&] { bad.validate(); }, ThrowsMessage<std::invalid_argument>(HasSubstr("gpu7")));
+  bad = c;
   bad.world_frame = "";
   EXPECT_THAT([&] { bad.validate(); }, ThrowsMessage<std::invalid_argument>(HasSubstr("world_frame must not be empty")));
   bad = c;
@@ -309,7 +315,7 @@ TEST_F(FineTuneJobTest, ProgressComesFromTheLogAndABetterModelIsReadyToReload) {
 
   // What umvs was asked to do: train from the served model, then evaluate both on the same data.
   std::vector<std::string> data = {"train", "--bag", bag_, "--image-topic", "/camera/image_rect_color",
-                                   "--camera-info-topic", "/camera/camera_info", "--world-frame", "world"};
+                                   "--camera-info-topic", "/camera/camera_info", "--world-frame", "world", "--device", "cpu"};
   const auto stream = keyframe_stream_train_args(config_.keyframes);
   data.insert(data.end(), stream.begin(), stream.end());
   data.insert(data.end(), {"--width", "128"});
