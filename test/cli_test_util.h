@@ -13,8 +13,6 @@
 #include <string>
 
 #include "test_util.h"
-#include "unsup_mvs/core/synth.h"
-#include "unsup_mvs/io/synth_writer.h"
 
 namespace umvs::test {
 
@@ -65,24 +63,13 @@ inline std::map<std::string, std::string> snapshot(const std::string& dir) {
   return files;
 }
 
-// A small synthetic room as an MVSNet folder (exact depth in depth_gt/), written once per name.
 // The smallest training run the command-line tests use (add --data, --steps, --out).
 inline const std::string kTrainFlags =
     " --width 96 --height 64 --num-depth 8 --views-loss 3 --top-k 2 --threads 1 --save-every 2";
 
+// A small synthetic room as an MVSNet folder (exact depth in depth_gt/), written once per name.
 inline std::string scene(const std::string& name, int width = 96, int height = 64, int views = 5) {
-  const std::string dir = temp_dir(name);
-  SynthConfig cfg;
-  cfg.scene = SynthSceneType::kRoom;
-  cfg.seed = 2;
-  cfg.num_views = views;
-  cfg.width = width;
-  cfg.height = height;
-  cfg.lighting_change = false;
-  cfg.supersample = 1;
-  cfg.gt_cloud_samples = 0;
-  write_synthetic_scene(dir, render_synthetic_scene(cfg), cfg);
-  return dir;
+  return write_room(name, 2, true, width, height, views);
 }
 
 }  // namespace umvs::test

@@ -1,99 +1,27 @@
 // Depth-map fusion on an analytic scene: a ground plane z = 0 with a sphere on it, seen by a ring
-// of cameras. Ground-truth depth maps are ray-cast here, so every fused point can be checked
-// against the exact surface.
+// of cameras (fusion_test_fixtures.h). Ground-truth depth maps are ray-cast there, so every fused
+// point can be checked against the exact surface. Streaming fusion: test_streaming_fusion.cpp.
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 #include <torch/torch.h>
 
+#include <algorithm>
 #include <cmath>
 #include <iostream>
+#include <limits>
 #include <set>
+#include <tuple>
 
+#include "fusion_test_fixtures.h"
 #include "unsup_mvs/core/fusion.h"
 
 namespace umvs {
 namespace {
 
-const Eigen::Vector3d kSphereCentre(0.0, 0.0, 0.3);
-const double kSphereRadius = 0.3;
-
-Camera look_at(const Eigen::Vector3d& centre, const Eigen::Vector3d& target, int w = 64, int h = 48) {
-  Eigen::Matrix3d K;
-  K << 60, 0, (w - 1) / 2.0, 0, 60, (h - 1) / 2.0, 0, 0, 1;
-  return Camera::look_at(centre, target, K, w, h);
-}
-
-// z-depth of the nearest surface (plane or sphere) for every pixel.  -> [H,W] float32
-torch::Tensor render_depth(const Camera& cam) {
-  const int H = cam.height, W = cam.width;
-  auto xs = torch::arange(W, torch::kFloat64).view({1, W}).expand({H, W});
-  auto ys = torch::arange(H, torch::kFloat64).view({H, 1}).expand({H, W});
-  const Eigen::Matrix3d M = cam.R().transpose() * cam.K.inverse();  // pixel -> world ray (camera z = 1)
-  auto ray = [&](int r) { return M(r, 0) * xs + M(r, 1) * ys + M(r, 2); };
-  auto dx = ray(0), dy = ray(1), dz = ray(2);
-  const Eigen::Vector3d C = cam.center();
-  const double inf = std::numeric_limits<double>::infinity();
-  auto s_plane = -C.z() / dz;
-  s_plane = torch::where(s_plane > 0, s_plane, torch::full_like(s_plane, inf));
-  const Eigen::Vector3d oc = C - kSphereCentre;
-  auto a = dx * dx + dy * dy + dz * dz;
-  auto b = 2 * (dx * oc.x() + dy * oc.y() + dz * oc.z());
-  const double c = oc.squaredNorm() - kSphereRadius * kSphereRadius;
-  auto disc = b * b - 4 * a * c;
-  auto s_sphere = (-b - torch::sqrt(disc.clamp_min(0))) / (2 * a);
-  s_sphere = torch::where((disc > 0) & (s_sphere > 0), s_sphere, torch::full_like(s_sphere, inf));
-  auto s = torch::minimum(s_plane, s_sphere);
-  return torch::where(torch::isfinite(s), s, torch::zeros_like(s)).to(torch::kFloat32);
-}
-
-// Distance of points [N,3] to the scene surface (plane z = 0 or sphere).  -> [N]
-torch::Tensor surface_distance(const torch::Tensor& pts) {
-  auto c = torch::tensor({kSphereCentre.x(), kSphereCentre.y(), kSphereCentre.z()}, torch::kFloat32);
-  auto d_sphere = ((pts - c).norm(2, 1) - kSphereRadius).abs();
-  auto d_plane = pts.select(1, 2).abs();
-  return torch::minimum(d_sphere, d_plane);
-}
-
-// Accuracy the fusion guarantees by construction: every point's depth is within
-// max_relative_depth (1%) of the reference depth, i.e. < 2.5 cm at the ~2.3 m of the farthest
-// pixels. Bilinear interpolation of the source depth (exact only for fronto-parallel surfaces)
-// and mixed depths at the sphere's silhouette average in a few millimetres at 64x48 pixels, so
-// the typical error is far smaller.
-void expect_accurate(const torch::Tensor& pts, double median = 2e-4, double p99 = 4e-3, double max = 0.025) {
-  ASSERT_GT(pts.size(0), 0);
-  auto err = surface_distance(pts);
-  EXPECT_LT(err.median().item<double>(), median);
-  EXPECT_LT(err.quantile(0.99).item<double>(), p99);
-  EXPECT_LT(err.max().item<double>(), max);
-}
-
-torch::Tensor to_tensor(const PointCloud& cloud) {
-  auto t = torch::empty({static_cast<int64_t>(cloud.size()), 3}, torch::kFloat32);
-  for (size_t i = 0; i < cloud.size(); ++i)
-    for (int k = 0; k < 3; ++k) t[i][k] = cloud.points[i][k];
-  return t;
-}
-
-std::vector<FusionView> ring_views(int n = 8) {
-  std::vector<FusionView> views;
-  for (int i = 0; i < n; ++i) {
-    const double a = 2.0 * M_PI * i / n * 0.5;  // half a ring: neighbours overlap well
-    FusionView v;
-    v.id = i;
-    v.camera = look_at({1.6 * std::cos(a), 1.6 * std::sin(a), 1.2}, {0, 0, 0.15});
-    v.depth = render_depth(v.camera);
-    views.push_back(v);
-  }
-  return views;
-}
-
-std::vector<std::vector<int>> all_others(size_t n) {
-  std::vector<std::vector<int>> s(n);
-  for (size_t i = 0; i < n; ++i)
-    for (size_t j = 0; j < n; ++j)
-      if (i != j) s[i].push_back(static_cast<int>(j));
-  return s;
-}
+using test::all_others;
+using test::expect_accurate;
+using test::ring_views;
+using test::to_tensor;
 
 // Share of `truth` points [M,3] with a cloud point within `tol`.
 double completeness(const torch::Tensor& cloud, const torch::Tensor& truth, double tol) {
@@ -287,118 +215,6 @@ TEST(DepthFusion, RejectsBadInput) {
   bad.min_confidence = 1.5;
   EXPECT_THROW(bad.validate(), std::invalid_argument);
   EXPECT_THROW(StreamingFusion(FusionConfig{}, 0, 100, torch::kCPU), std::invalid_argument);
-}
-
-TEST(StreamingFusion, AgreesWithBatchFusion) {
-  auto views = ring_views(6);
-  FusionConfig cfg;
-  auto batch = DepthFusion(cfg, torch::kCPU).fuse(views, all_others(views.size()));
-  StreamingFusion stream(cfg, 6, 1000000, torch::kCPU);
-  size_t streamed = 0;
-  for (const auto& v : views) streamed += stream.add(v).size();
-  EXPECT_EQ(stream.num_views(), 6u);
-  EXPECT_EQ(streamed, stream.cloud().size());
-  ASSERT_EQ(stream.cloud().size(), batch.size());  // the same pixels survive
-  // The same points, up to averaging over fewer views at emission time.
-  auto d = torch::cdist(to_tensor(stream.cloud()), to_tensor(batch)).amin(1);
-  EXPECT_LT(d.median().item<double>(), 1e-4);
-  EXPECT_LT(d.max().item<double>(), 0.01);
-  expect_accurate(to_tensor(stream.cloud()));
-  EXPECT_GE(*std::min_element(stream.cloud().num_views.begin(), stream.cloud().num_views.end()), 3);
-}
-
-TEST(StreamingFusion, FirstViewsConfirmedLaterAndWindowBoundsMemory) {
-  auto views = ring_views(8);
-  FusionConfig cfg;
-  StreamingFusion stream(cfg, 3, 1000000, torch::kCPU);
-  // Nothing can be confirmed before 4 estimates exist (3 agreeing others needed).
-  EXPECT_EQ(stream.add(views[0]).size(), 0u);
-  EXPECT_EQ(stream.add(views[1]).size(), 0u);
-  EXPECT_EQ(stream.add(views[2]).size(), 0u);
-  auto fourth = stream.add(views[3]);
-  EXPECT_GT(fourth.size(), 1000u);  // all four views' shared pixels at once
-  EXPECT_EQ(stream.num_views(), 3u);  // the ring holds `window` estimates
-  for (size_t i = 4; i < views.size(); ++i) stream.add(views[i]);
-  EXPECT_EQ(stream.num_views(), 3u);
-  expect_accurate(to_tensor(stream.cloud()));
-  stream.reset();
-  EXPECT_EQ(stream.num_views(), 0u);
-  EXPECT_TRUE(stream.cloud().empty());
-}
-
-TEST(StreamingFusion, VoxelHashAndPointLimitBoundTheCloud) {
-  auto views = ring_views(8);
-  FusionConfig cfg;
-  cfg.voxel_size = 0.03;
-  StreamingFusion stream(cfg, 8, 1000000, torch::kCPU);
-  for (const auto& v : views) stream.add(v);
-  std::set<std::tuple<int64_t, int64_t, int64_t>> cells;
-  for (const auto& p : stream.cloud().points) {
-    EXPECT_TRUE(cells.insert({int64_t(std::floor(p.x() / 0.03)), int64_t(std::floor(p.y() / 0.03)), int64_t(std::floor(p.z() / 0.03))}).second);
-  }
-  const size_t full = stream.cloud().size();
-  ASSERT_GT(full, 200u);
-  StreamingFusion small(cfg, 8, 100, torch::kCPU);
-  for (const auto& v : views) {
-    small.add(v);
-    EXPECT_LE(small.cloud().size(), 100u);
-  }
-  EXPECT_GT(small.cloud().size(), 50u);
-}
-
-TEST(StreamingFusion, BadViewLeavesStateUnchanged) {
-  auto views = ring_views(4);
-  StreamingFusion stream(FusionConfig{}, 4, 1000000, torch::kCPU);
-  for (const auto& v : views) stream.add(v);
-  const size_t n = stream.cloud().size();
-  auto bad = views[0];
-  bad.color = torch::zeros({10, 10, 3}, torch::kUInt8);
-  EXPECT_THROW(stream.add(bad), std::invalid_argument);
-  EXPECT_EQ(stream.num_views(), 4u);
-  EXPECT_EQ(stream.cloud().size(), n);
-}
-
-TEST(StreamingFusion, NewThresholdsApplyFromTheNextView) {
-  auto views = ring_views(8);
-  FusionConfig cfg;  // 3 agreeing views
-  StreamingFusion stream(cfg, 8, 1000000, torch::kCPU);
-  for (int i = 0; i < 3; ++i) EXPECT_EQ(stream.add(views[i]).size(), 0u);
-
-  // Invalid: refused, nothing changed.
-  FusionConfig bad = cfg;
-  bad.max_reprojection_px = 0;
-  EXPECT_THROW(stream.set_config(bad), std::invalid_argument);
-  EXPECT_DOUBLE_EQ(stream.config().max_reprojection_px, cfg.max_reprojection_px);
-
-  // A stricter rule: the fourth view, which confirms the shared pixels at 3 views, adds nothing.
-  FusionConfig strict = cfg;
-  strict.min_agreeing_views = 5;
-  stream.set_config(strict);
-  EXPECT_EQ(stream.config().min_agreeing_views, 5);
-  EXPECT_EQ(stream.add(views[3]).size(), 0u);
-  // Back to 3: the next view emits the pixels the four stored ones already agree on, and more.
-  stream.set_config(cfg);
-  EXPECT_GT(stream.add(views[4]).size(), 1000u);
-  expect_accurate(to_tensor(stream.cloud()));
-
-  // A voxel grid from now on: the next view adds only points in voxels not yet taken, and fewer
-  // than the same stream without the grid adds.
-  StreamingFusion plain(cfg, 8, 1000000, torch::kCPU);
-  for (int i = 0; i < 5; ++i) plain.add(views[i]);
-  FusionConfig voxels = cfg;
-  voxels.voxel_size = 0.03;
-  stream.set_config(voxels);
-  std::set<std::tuple<int64_t, int64_t, int64_t>> taken;
-  auto cell = [](const Eigen::Vector3f& p) {
-    return std::make_tuple(int64_t(std::floor(p.x() / 0.03)), int64_t(std::floor(p.y() / 0.03)),
-                           int64_t(std::floor(p.z() / 0.03)));
-  };
-  for (const auto& p : stream.cloud().points) taken.insert(cell(p));
-  const PointCloud without_grid = plain.add(views[5]);
-  const PointCloud with_grid = stream.add(views[5]);
-  ASSERT_GT(without_grid.size(), 100u);
-  EXPECT_LT(with_grid.size(), without_grid.size());
-  for (const auto& p : with_grid.points) EXPECT_TRUE(taken.insert(cell(p)).second);
 }
 
 TEST(DepthFusion, PerPixelLoopMatchesTensorOps) {

@@ -4,12 +4,15 @@
 #include <gtest/gtest.h>
 #include <torch/types.h>
 
+#include <cstdint>
 #include <cstdlib>
 #include <filesystem>
 #include <string>
 
 #include "scratch_dirs.h"
+#include "unsup_mvs/core/synth.h"
 #include "unsup_mvs/io/import.h"
+#include "unsup_mvs/io/synth_writer.h"
 
 namespace umvs::test {
 
@@ -22,6 +25,25 @@ inline std::string shared_data_dir() {
 
 // A fresh, empty temporary folder for one test.
 inline std::string temp_dir(const std::string& name) { return umvs_scratch::scratch_dir("umvs_test_", name); }
+
+// A rendered room (core/synth.h, no lighting change) written as an MVSNet folder in a fresh
+// temp_dir(name), with its exact depth in depth_gt/ unless keep_ground_truth is false.
+inline std::string write_room(const std::string& name, uint64_t seed, bool keep_ground_truth, int width = 128,
+                              int height = 96, int views = 6, int supersample = 1) {
+  const std::string dir = temp_dir(name);
+  SynthConfig cfg;
+  cfg.scene = SynthSceneType::kRoom;
+  cfg.seed = seed;
+  cfg.num_views = views;
+  cfg.width = width;
+  cfg.height = height;
+  cfg.lighting_change = false;
+  cfg.supersample = supersample;
+  cfg.gt_cloud_samples = 0;
+  write_synthetic_scene(dir, render_synthetic_scene(cfg), cfg);
+  if (!keep_ground_truth) std::filesystem::remove_all(dir + "/depth_gt");
+  return dir;
+}
 
 // The rendered living room of ../shared/data (ICL-NUIM's camera: fy < 0, the image's y flipped).
 inline CameraIntrinsics living_room_intrinsics() {
