@@ -58,7 +58,7 @@ done
 inst=$ws/install
 share=$(in_space "$inst" "rospack find unsup_mvs")
 [[ "$share" == "$inst/share/unsup_mvs" ]] || fail "rospack find unsup_mvs gave '$share', not the install space"
-for node in keyframe_selector_node inference_node fusion_node trainer_node umvs; do
+for node in keyframe_selector_node inference_node fusion_node trainer_node umvs flush_replay.py; do
   [[ -x "$inst/lib/unsup_mvs/$node" ]] || fail "$inst/lib/unsup_mvs/$node missing"
 done
 [[ -f "$inst/lib/libunsup_mvs_ros.so" ]] || fail "nodelet library $inst/lib/libunsup_mvs_ros.so missing"

@@ -1,4 +1,4 @@
-// scripts/judge_audit.sh (docs/results.md, "the reload rule audited"): one short fine-tuning run
+// scripts/experiments/judge_audit.sh (docs/results.md, "the reload rule audited"): one short fine-tuning run
 // through the script, to hold the plumbing that its table relies on: the verdict is the trainer
 // rule's own line, the before/after columns come from eval.csv in the order `--against` writes it,
 // "better/worse/mixed" follows the numbers it prints, and the second pass is another path through
@@ -18,7 +18,7 @@ using test::run_shell;
 TEST(JudgeAuditScript, ARunGivesTheRulesVerdictAndTheGroundTruthItNeverSaw) {
   const std::string work = test::temp_dir("judge_audit");
   const std::string command = "STEPS=3 SEEDS=1 ADAPT=photometric SCENES=room:301 THREADS=2 UMVS=" +
-                              test::umvs_binary() + " bash " + UMVS_SOURCE_DIR + "/scripts/judge_audit.sh " + work;
+                              test::umvs_binary() + " bash " + UMVS_SOURCE_DIR + "/scripts/experiments/judge_audit.sh " + work;
   const test::Result r = run_shell(command);
   ASSERT_EQ(r.status, 0) << r.output;
 

@@ -31,7 +31,7 @@ TEST(CliHelp, EverySubcommandPrintsCli11HelpWithItsDefaults) {
       {"eval cloud", "--thresholds TEXT=0.002,0.005,0.01"},
       {"fuse", "--window NUMBER=10"},
       {"import middlebury", "--margin NUMBER=0.1"},
-      {"import rgbd", "--num-depth NUMBER=192"},
+      {"import rgbd", "--num-depth INT=192"},  // an integer field: INT
       {"infer", "--device TEXT=cpu"},
       {"render", "--height NUMBER=480"},
       {"synth", "--scene TEXT=room"},

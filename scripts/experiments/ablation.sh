@@ -7,12 +7,11 @@
 # tuples in the same order; only the loss differs. K = 6 of 6 keeps every view, which is exactly the
 # first-order loss: that run is shared.
 #
-# Usage: scripts/ablation.sh [WORK_DIR]      (environment: UMVS, STEPS, WIDTH, HEIGHT, NUM_DEPTH, THREADS)
+# Usage: scripts/experiments/ablation.sh [WORK_DIR]      (environment: UMVS, STEPS, WIDTH, HEIGHT, NUM_DEPTH, THREADS)
 # Prints a markdown table and writes it to WORK_DIR/ablation.md.
 set -euo pipefail
 
-here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
-UMVS="${UMVS:-$here/../build/devel/lib/unsup_mvs/umvs}"
+source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 WORK="${1:-/tmp/umvs_ablation}"
 STEPS="${STEPS:-200}"
 WIDTH="${WIDTH:-128}"
@@ -21,7 +20,7 @@ NUM_DEPTH="${NUM_DEPTH:-24}"
 THREADS="${THREADS:-1}"
 VIEWS=12
 
-[ -x "$UMVS" ] || { echo "umvs not found at $UMVS (set UMVS=/path/to/umvs)" >&2; exit 1; }
+require_umvs
 mkdir -p "$WORK/data"
 
 train_dirs=()

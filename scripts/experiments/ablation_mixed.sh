@@ -4,29 +4,27 @@
 #   photometric   rendered scenes and the real templeRing images, robust photometric loss only
 #                 (the paper's method: no label anywhere)
 #   mixed         rendered scenes supervised + templeRing photometric, in one optimisation (the
-#                 default model's recipe, scripts/train_default_model.sh)
+#                 default model's recipe, scripts/experiments/train_default_model.sh)
 #   mixed + self  the mixed model, then self-training on templeRing (its own multi-view
 #                 consistent depth as labels, photometric elsewhere; no ground truth read)
 # Every run starts from the same random weights (--seed 1) and takes STEPS steps (the self-training
 # stage STEPS/4 more). Scored on held-out rendered scenes (seeds 5000.., never trained on) and on the
 # living room (../shared/data/livingroom), which no run sees.
 #
-# Usage: scripts/ablation_mixed.sh [WORK_DIR]
+# Usage: scripts/experiments/ablation_mixed.sh [WORK_DIR]
 #   environment: UMVS, STEPS (600), THREADS (1), WIDTH x HEIGHT (160 x 128), NUM_DEPTH (32),
-#   RENDERED (a folder of scripts/render_training_scenes.sh output; rendered into WORK when unset)
+#   RENDERED (a folder of scripts/experiments/render_training_scenes.sh output; rendered into WORK when unset)
 # Prints a markdown table and writes it to WORK_DIR/ablation_mixed.md.
 set -euo pipefail
 
-here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
-UMVS="${UMVS:-$here/../build/devel/lib/unsup_mvs/umvs}"
+source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 WORK="${1:-/tmp/umvs_ablation_mixed}"
 STEPS="${STEPS:-600}"
 THREADS="${THREADS:-1}"
 WIDTH="${WIDTH:-160}"
 HEIGHT="${HEIGHT:-128}"
 NUM_DEPTH="${NUM_DEPTH:-32}"
-SHARED="${UMVS_SHARED_DATA:-$here/../../shared/data}"
-[ -x "$UMVS" ] || { echo "umvs not found at $UMVS (set UMVS=/path/to/umvs)" >&2; exit 1; }
+require_umvs
 for d in templeRing livingroom; do
   [ -d "$SHARED/$d" ] || { echo "needs $SHARED/$d" >&2; exit 1; }
 done
@@ -35,7 +33,7 @@ export MALLOC_MMAP_THRESHOLD_=33554432 OPENBLAS_NUM_THREADS=1
 
 RENDERED="${RENDERED:-$WORK/data/rendered}"
 [ -f "$RENDERED/train.txt" ] || UMVS="$UMVS" WIDTH=320 HEIGHT=256 THREADS="$THREADS" \
-  bash "$here/render_training_scenes.sh" "$RENDERED" 8 1
+  bash "$experiments_dir/render_training_scenes.sh" "$RENDERED" 8 1
 rendered="$(cat "$RENDERED/train.txt")"
 heldout="$(cat "$RENDERED/heldout.txt")"
 [ -f "$WORK/data/templeRing/pair.txt" ] ||

@@ -6,13 +6,13 @@
 #   --nproc 2,  --batch 1 each, cores/2 threads each (Gloo over loopback)
 # and the median seconds per step (train_log.csv, steps after the first 3). Prints a markdown table.
 #
-# Usage: scripts/bench_data_parallel.sh [STEPS]   (default 20)
+# Usage: scripts/experiments/bench_data_parallel.sh [STEPS]   (default 20)
 set -euo pipefail
-cd "$(dirname "$0")/.."
+source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
+cd "$REPO"
 export PATH=/usr/bin:$PATH
-UMVS=${UMVS:-build/devel/lib/unsup_mvs/umvs}
 STEPS=${1:-20}
-[ -x "$UMVS" ] || { echo "build first: $UMVS missing" >&2; exit 1; }
+require_umvs
 WORK=$(mktemp -d /tmp/umvs_bench_dp.XXXXXX)
 trap 'rm -rf "$WORK"' EXIT
 CORES=$(nproc)

@@ -8,13 +8,12 @@
 # (--no-tuning: OpenBLAS threads and glibc malloc left alone) and fusion with 1 and 2 threads.
 # Prints markdown tables for docs/performance.md.
 #
-# Usage: scripts/bench_vs_reference.sh [--reference-dir DIR] [--reps N] [--runs N]
+# Usage: scripts/experiments/bench_vs_reference.sh [--reference-dir DIR] [--reps N] [--runs N]
 #   DIR: a checkout of github.com/xy-guo/MVSNet_pytorch (only models/ is imported; optional)
 set -euo pipefail
-cd "$(dirname "$0")/.."
+source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
+cd "$REPO"
 export PATH=/usr/bin:$PATH
-SHARED=${UMVS_SHARED_DATA:-../shared/data}
-UMVS=${UMVS:-build/devel/lib/unsup_mvs/umvs}
 WEIGHTS=$SHARED/mvsnet_parity/mvsnet_pytorch_d192.pt
 REF_DIR=""
 REPS=3
@@ -27,7 +26,7 @@ while [ $# -gt 0 ]; do
     *) echo "unknown argument $1" >&2; exit 2 ;;
   esac
 done
-[ -x "$UMVS" ] || { echo "build first: $UMVS missing" >&2; exit 1; }
+require_umvs
 [ -f "$WEIGHTS" ] || { echo "published weights not found: $WEIGHTS" >&2; exit 1; }
 if [ -n "$REF_DIR" ] && ! python3 -c "import torch" 2>/dev/null; then
   echo "python3 has no torch (apt-get install python3-torch): reference column skipped" >&2

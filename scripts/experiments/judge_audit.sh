@@ -11,7 +11,7 @@
 # training keyframes; so both models are also scored on a second pass through the same scene
 # (`umvs synth --path-seed`, 10 keyframes no run saw, each judged against the others).
 #
-# Usage: scripts/judge_audit.sh [WORK_DIR]
+# Usage: scripts/experiments/judge_audit.sh [WORK_DIR]
 #   environment: UMVS, THREADS (2), STEPS (150), SEEDS ("1 2": --seed of each fine-tuning run),
 #                ADAPT ("photometric self": photometric, and plain self-training (--anchor-unconfirmed 0);
 #                also "confident", self-training as umvs train does it by default (anchored
@@ -30,9 +30,8 @@
 # Writes WORK_DIR/audit.md (one row per run and a tally) and prints it.
 set -euo pipefail
 
-here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
-repo="$(cd "$here/.." && pwd)"
-UMVS="${UMVS:-$repo/build/devel/lib/unsup_mvs/umvs}"
+source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
+repo="$REPO"
 WORK="${1:-/tmp/umvs_judge_audit}"
 THREADS="${THREADS:-2}"
 STEPS="${STEPS:-150}"
@@ -42,7 +41,7 @@ SCENES="${SCENES:-room:301 facade:302 dtu_like:303}"
 SERVED="${SERVED:-$repo/models/unsup_mvsnet.pt}"
 TEXTURES="${TEXTURES:-none}"
 SECOND_PASS="${SECOND_PASS:-1}"
-[ -x "$UMVS" ] || { echo "umvs not found at $UMVS (set UMVS=/path/to/umvs)" >&2; exit 1; }
+require_umvs
 [ -f "$SERVED" ] || { echo "served model not found: $SERVED" >&2; exit 1; }
 mkdir -p "$WORK"
 

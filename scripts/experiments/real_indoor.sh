@@ -7,21 +7,19 @@
 # range at import (as the keyframe selector's range follows the last depth map) and scores;
 # nothing else reads it.
 #
-# Usage: scripts/real_indoor.sh [WORK_DIR]
+# Usage: scripts/experiments/real_indoor.sh [WORK_DIR]
 #   environment: UMVS (build/devel/lib/unsup_mvs/umvs), CHECKPOINT (models/unsup_mvsnet.pt),
 #                SETS ("hololens tum sevenscenes"), INFER_ARGS (extra `umvs infer` options),
 #                FUSE_ARGS (extra `umvs fuse` options), SHARED (../shared/data), THREADS (0 = all)
 # Prints one table row per set; each step's full output stays in WORK_DIR/<set>/*.txt.
 set -euo pipefail
-here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
-repo="$here/.."
-UMVS=${UMVS:-$repo/build/devel/lib/unsup_mvs/umvs}
+source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
+repo="$REPO"
 CHECKPOINT=${CHECKPOINT:-$repo/models/unsup_mvsnet.pt}
-SHARED=${SHARED:-$repo/../shared/data}
 SETS=${SETS:-hololens tum sevenscenes}
 THREADS=${THREADS:-0}
 WORK=${1:-/tmp/umvs_real_indoor}
-[[ -x "$UMVS" ]] || { echo "real_indoor: no umvs at $UMVS (bash scripts/build.sh)" >&2; exit 1; }
+require_umvs
 [[ -d "$SHARED" ]] || { echo "real_indoor: no data at $SHARED" >&2; exit 1; }
 mkdir -p "$WORK"
 

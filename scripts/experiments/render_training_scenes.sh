@@ -5,7 +5,7 @@
 # driving, a robot turning in place, an object-scan orbit or random views), plus a held-out set
 # rendered from other seeds. Prints the time it took.
 #
-#   scripts/render_training_scenes.sh OUT [N] [N_HELDOUT]      (defaults: N = 8, N_HELDOUT = 2)
+#   scripts/experiments/render_training_scenes.sh OUT [N] [N_HELDOUT]      (defaults: N = 8, N_HELDOUT = 2)
 #
 # Writes OUT/train/<recipe>_<seed>/ and OUT/heldout/<recipe>_<seed>/ (MVSNet folders with
 # depth_gt/, see `umvs synth --help`), and OUT/train.txt, OUT/heldout.txt: the folders as one
@@ -17,9 +17,8 @@
 # Seeds: training 1000 + i, held-out 5000 + i (no other script uses these).
 set -euo pipefail
 
-here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
-UMVS="${UMVS:-$here/../build/devel/lib/unsup_mvs/umvs}"
-OUT="${1:?usage: scripts/render_training_scenes.sh OUT [N] [N_HELDOUT]}"
+source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
+OUT="${1:?usage: scripts/experiments/render_training_scenes.sh OUT [N] [N_HELDOUT]}"
 N="${2:-8}"
 N_HELDOUT="${3:-2}"
 TEXTURES="${TEXTURES:-installed}"
@@ -28,7 +27,7 @@ HEIGHT="${HEIGHT:-128}"
 THREADS="${THREADS:-0}"
 JOBS="${JOBS:-1}"  # scenes rendered at once (each with THREADS threads)
 
-[ -x "$UMVS" ] || { echo "umvs not found at $UMVS (set UMVS=/path/to/umvs)" >&2; exit 1; }
+require_umvs
 if [ "$TEXTURES" = installed ] && [ ! -d /usr/share/gimp/2.0/patterns ] && [ ! -d /usr/share/backgrounds/mate/nature ]; then
   echo "[render] no photographic textures installed: run scripts/install_textures.sh (or set TEXTURES=none)" >&2
   exit 1

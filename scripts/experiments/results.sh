@@ -25,7 +25,7 @@
 #               and "long" (4x the steps): mistakes the reload rule must turn down.
 # Each cell: mean abs err (m) / abs rel / within 1 % (%); templeRing: points / % inside the box.
 #
-# Usage: scripts/results.sh [WORK_DIR]
+# Usage: scripts/experiments/results.sh [WORK_DIR]
 #   environment: UMVS, THREADS (2), STEPS (fine-tuning steps, 150), MODELS ("new old mvsnet"),
 #                ADAPT ("none photometric self"), ADAPT_MODELS ("new mvsnet") and ADAPT_TARGETS
 #                ("livingroom templeRing"): which models are adapted on which targets (others: "-"),
@@ -36,11 +36,9 @@
 #                `umvs infer --source-combination`, variance: as the tables were measured)
 set -euo pipefail
 
-here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
-repo="$here/.."
-UMVS="${UMVS:-$repo/build/devel/lib/unsup_mvs/umvs}"
+source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
+repo="$REPO"
 WORK="${1:-/tmp/umvs_results}"
-SHARED="${UMVS_SHARED_DATA:-$repo/../shared/data}"
 THREADS="${THREADS:-2}"
 STEPS="${STEPS:-150}"
 MODELS="${MODELS:-new old mvsnet}"
@@ -51,7 +49,7 @@ ADAPT_TARGETS="${ADAPT_TARGETS:-livingroom templeRing}"
 EVAL_TUPLES="${EVAL_TUPLES:-0}"
 COMPLETION="${COMPLETION:-0}"
 SOURCES="${SOURCES:-variance}"
-[ -x "$UMVS" ] || { echo "umvs not found at $UMVS (set UMVS=/path/to/umvs)" >&2; exit 1; }
+require_umvs
 for d in mvsnet_parity livingroom templeRing; do
   [ -d "$SHARED/$d" ] || { echo "needs $SHARED/$d" >&2; exit 1; }
 done
@@ -85,7 +83,7 @@ rendered=$(IFS=,; echo "${rendered_dirs[*]}")
 rehearsal_scenes() {
   [ -f "$WORK/data/rehearsal/train.txt" ] ||
     UMVS="$UMVS" TEXTURES=none WIDTH=320 HEIGHT=256 THREADS="$THREADS" \
-      bash "$here/render_training_scenes.sh" "$WORK/data/rehearsal" 2 0 >&2
+      bash "$experiments_dir/render_training_scenes.sh" "$WORK/data/rehearsal" 2 0 >&2
   cat "$WORK/data/rehearsal/train.txt"
 }
 TEMPLE_BBOX=-0.023121,-0.038009,-0.091940,0.078626,0.121636,-0.017395
@@ -123,7 +121,7 @@ adapt_args() {
     # The same at a tenth of the training rate (docs/results.md, "Rejected ideas").
     photometric_lr1e-4) echo "--lr 1e-4" ;;
     # The robust loss on the target with half of the steps supervised on rendered training scenes
-    # (scripts/render_training_scenes.sh: two of each recipe, procedural textures), so that the
+    # (scripts/experiments/render_training_scenes.sh: two of each recipe, procedural textures), so that the
     # model keeps what it learnt there (docs/results.md, "Rejected ideas").
     photometric_rehearsal) echo "--supervised-data $(rehearsal_scenes) --supervised-share 0.5 --supervised-weight 0.1" ;;
     self) echo "--self-training-every 25" ;;
@@ -197,15 +195,14 @@ cell() {
 judge() {
   local before="$WORK/eval/$1_none_$3/eval.csv" after="$WORK/eval/$1_$2_$3/eval.csv"
   [ -f "$before" ] && [ -f "$after" ] || return 0
-  awk -F, -v what="$(label "$1"), $2" -v target="$3" '
+  local verdict
+  verdict=$("$UMVS" eval rule --served "$before" --candidate "$after" | head -n 1)  # the trainer node's own rule
+  awk -F, -v what="$(label "$1"), $2" -v target="$3" -v accept="$([ "$verdict" = reload ] && echo 1 || echo 0)" '
     FNR == 1 { for (i = 1; i <= NF; ++i) col[$i] = i; next }
     NR == FNR { e0 = $col["abs_err"]; r0 = $col["abs_rel"]; w0 = $col["within_1pct"]
                 p0 = $col["photometric"]; c0 = $col["consistent"]; next }
     { e1 = $col["abs_err"]; r1 = $col["abs_rel"]; w1 = $col["within_1pct"]; p1 = $col["photometric"]; c1 = $col["consistent"] }
     END {
-      # As the trainer node (decide_reload): photometric at least 1 % lower, consistency higher by at
-      # least one percentage point.
-      accept = (p1 < 0.99 * p0 && c1 >= c0 + 0.01)
       improved = (e1 < e0) + (r1 < r0) + (w1 > w0)  # of the three ground-truth scores
       depth = improved == 3 ? "better" : improved == 0 ? "worse" : "mixed"
       if (depth == "mixed") right = "mixed"

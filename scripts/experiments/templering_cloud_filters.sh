@@ -2,13 +2,12 @@
 # What the optional PCL filters of `umvs fuse` (io/cloud_filter.h) do on templeRing: points, share
 # inside the bounding box and time per filter (docs/fusion.md, "Cleaning the cloud with PCL"), and
 # the streaming fusion's voxel hash against pcl::VoxelGrid on the same fused views.
-# Usage: scripts/templering_cloud_filters.sh [WORK_DIR]   (default /tmp/umvs_templering_filters)
+# Usage: scripts/experiments/templering_cloud_filters.sh [WORK_DIR]   (default /tmp/umvs_templering_filters)
 # Reuses WORK_DIR/out when it holds `umvs infer` output (the shipped model, 128 planes).
 set -euo pipefail
-cd "$(dirname "$0")/.."
+source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
+cd "$REPO"
 export PATH=/usr/bin:$PATH
-SHARED=${UMVS_SHARED_DATA:-../shared/data}
-UMVS=${UMVS:-build/devel/lib/unsup_mvs/umvs}
 WORK=${1:-/tmp/umvs_templering_filters}
 THREADS=${THREADS:-2}
 BBOX=-0.023121,-0.038009,-0.091940,0.078626,0.121636,-0.017395

@@ -6,12 +6,11 @@
 #   +-1 cm (rounded outwards to the mm, as the parity cases), then
 #   `umvs fuse --source-rule mvsnet` (eval.py: conf > 0.8, 1 px, 1 %, >= 3 of 10 sources) and,
 #   for comparison, the default rule.
-# Usage: scripts/templering_mvsnet_fusion.sh [WORK_DIR]   (default /tmp/umvs_templering_mvsnet)
+# Usage: scripts/experiments/templering_mvsnet_fusion.sh [WORK_DIR]   (default /tmp/umvs_templering_mvsnet)
 set -euo pipefail
-cd "$(dirname "$0")/.."
+source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
+cd "$REPO"
 export PATH=/usr/bin:$PATH
-SHARED=${UMVS_SHARED_DATA:-../shared/data}
-UMVS=${UMVS:-build/devel/lib/unsup_mvs/umvs}
 WORK=${1:-/tmp/umvs_templering_mvsnet}
 THREADS=${THREADS:-2}
 [ -d "$SHARED/templeRing" ] || { echo "no $SHARED/templeRing" >&2; exit 1; }

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Trains the default model models/unsup_mvsnet.pt with no real label:
-#   * rendered scenes (`scripts/render_training_scenes.sh`: objects on a table, furnished rooms,
+#   * rendered scenes (`scripts/experiments/render_training_scenes.sh`: objects on a table, furnished rooms,
 #     corridors and streets wearing photographs, object-scan and robot camera paths, lighting
 #     changes, specular and textureless patches) are supervised on their exact depth (smooth L1 in
 #     depth intervals, MVSNet's loss);
@@ -13,7 +13,7 @@
 # real data picks it). Writes WORK/run/{last.pt,best.pt,train_log.csv,loss_curve.png}; rerunning
 # resumes from WORK/run/last.pt.
 #
-# Usage: scripts/train_default_model.sh [WORK_DIR]
+# Usage: scripts/experiments/train_default_model.sh [WORK_DIR]
 #   environment: UMVS, STEPS (6000), THREADS (2), SEED (1), SCENES_PER_RECIPE (8), TEXTURES
 #   (installed | DIR[,DIR] | none), DEVICE (cpu | cuda), WIDTH x HEIGHT, NUM_DEPTH (160 x 128, 32),
 #   BATCH (1), INIT (start from this checkpoint instead of random weights), MAX_MINUTES (0: none),
@@ -45,8 +45,7 @@
 # scripts/portable_deps.sh --textures (docs/building.md).
 set -euo pipefail
 
-here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
-UMVS="${UMVS:-$here/../build/devel/lib/unsup_mvs/umvs}"
+source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 WORK="${1:-/tmp/umvs_default_model}"
 STEPS="${STEPS:-6000}"
 THREADS="${THREADS:-2}"
@@ -69,9 +68,8 @@ RENDER_HEIGHT="${RENDER_HEIGHT:-256}"
 SUPERVISED_SHARE="${SUPERVISED_SHARE:-0.75}"
 MIN_ZOOM="${MIN_ZOOM:-1}"
 MAX_ZOOM="${MAX_ZOOM:-1.25}"
-SHARED="${UMVS_SHARED_DATA:-$here/../../shared/data}"
 
-[ -x "$UMVS" ] || { echo "umvs not found at $UMVS (set UMVS=/path/to/umvs)" >&2; exit 1; }
+require_umvs
 mkdir -p "$WORK/data"
 # glibc keeps freed tensor buffers instead of unmapping them (no page faults on every step) and
 # BLAS does not spin threads next to LibTorch's: 2-3x faster steps on a busy 2-core machine.
@@ -82,7 +80,7 @@ export OPENBLAS_NUM_THREADS=1
 # RENDER_WIDTH x RENDER_HEIGHT; training zooms, crops and scales them to WIDTH x HEIGHT.
 RENDER_JOBS="${RENDER_JOBS:-1}"
 UMVS="$UMVS" TEXTURES="$TEXTURES" WIDTH="$RENDER_WIDTH" HEIGHT="$RENDER_HEIGHT" JOBS="$RENDER_JOBS" THREADS=$((RENDER_JOBS > 1 ? 1 : THREADS)) \
-  bash "$here/render_training_scenes.sh" "$WORK/data/rendered" "$SCENES_PER_RECIPE" 1
+  bash "$experiments_dir/render_training_scenes.sh" "$WORK/data/rendered" "$SCENES_PER_RECIPE" 1
 supervised_list="$(cat "$WORK/data/rendered/train.txt")"
 val_list="$(cat "$WORK/data/rendered/heldout.txt")"
 

@@ -14,6 +14,7 @@
 #include "unsup_mvs/core/metrics.h"
 #include "unsup_mvs/io/array_io.h"
 #include "unsup_mvs/io/cloud_file.h"
+#include "unsup_mvs/io/fine_tune_job.h"
 #include "unsup_mvs/io/inference_folder.h"
 #include "unsup_mvs/io/mvs_folder.h"
 #include "unsup_mvs/tools/args.h"
@@ -418,12 +419,34 @@ int eval_cloud(int argc, char** argv) {
   return 0;
 }
 
+// The trainer node's reload rule (io/fine_tune_job.h, decide_reload) on two `umvs train --eval-only`
+// results, for scripts that tabulate its verdicts.
+int eval_rule(int argc, char** argv) {
+  umvs::Args args("eval rule",
+                  "The trainer node's reload rule on two evaluations (eval.csv of `umvs train --eval-only`): prints\n"
+                  "'reload' or 'keep', then the comparison it made.");
+  args.required("served", "eval.csv of the served model")
+      .required("candidate", "eval.csv of the adapted model");
+  if (!args.parse(argc, argv)) return 0;
+  umvs::EvalScores served, candidate;
+  for (const auto& [name, scores] : {std::pair{"served", &served}, std::pair{"candidate", &candidate}}) {
+    if (!umvs::read_eval_scores(args.str(name), scores)) {
+      throw std::invalid_argument("--" + std::string(name) + " " + args.str(name) +
+                                  ": no held-out photometric loss and consistency in it (an eval.csv of umvs train --eval-only?)");
+    }
+  }
+  const umvs::ReloadVerdict verdict = umvs::decide_reload(candidate, served);
+  std::printf("%s\n%s\n", verdict.reload ? "reload" : "keep", verdict.comparison.c_str());
+  return 0;
+}
+
 }  // namespace
 
 UMVS_COMMAND(eval, "depth-map (eval depth) and point-cloud (eval cloud) metrics against ground truth") {
   const std::string help = umvs::subcommands_help(
       "umvs eval", "Metrics against ground truth: umvs eval depth --est DIR --gt DIR, umvs eval cloud --est PLY --gt PLY.",
-      {{"depth", "depth maps of `umvs infer` against depth_gt/"}, {"cloud", "a fused cloud against a ground-truth cloud"}});
+      {{"depth", "depth maps of `umvs infer` against depth_gt/"}, {"cloud", "a fused cloud against a ground-truth cloud"},
+       {"rule", "the trainer node's reload rule on two `umvs train --eval-only` results"}});
   if (argc < 1) {
     std::cerr << help;
     return 2;
@@ -431,9 +454,10 @@ UMVS_COMMAND(eval, "depth-map (eval depth) and point-cloud (eval cloud) metrics 
   const std::string mode = argv[0];
   if (mode == "depth") return eval_depth(argc - 1, argv + 1);
   if (mode == "cloud") return eval_cloud(argc - 1, argv + 1);
+  if (mode == "rule") return eval_rule(argc - 1, argv + 1);
   if (mode == "--help" || mode == "-h") {
     std::cout << help;
     return 0;
   }
-  throw std::invalid_argument("unknown evaluation '" + mode + "' (expected depth or cloud; see umvs eval --help)");
+  throw std::invalid_argument("unknown evaluation '" + mode + "' (expected depth, cloud or rule; see umvs eval --help)");
 }

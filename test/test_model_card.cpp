@@ -1,0 +1,35 @@
+// The model card's rebuild command (docs/results.md, "Model card"): scripts/experiments/
+// train_default_model.sh run end to end at a tiny size (one scene per recipe at 96x64, 2 steps), so
+// that the command that made models/unsup_mvsnet.pt keeps working: it renders its scenes, imports
+// templeRing when ../shared is there, trains and leaves a checkpoint that umvs infer serves.
+#include <gtest/gtest.h>
+#include <torch/torch.h>
+
+#include <filesystem>
+#include <string>
+
+#include "cli_test_util.h"
+#include "unsup_mvs/io/checkpoint.h"
+
+namespace umvs {
+namespace {
+
+TEST(ModelCard, TheRebuildScriptTrainsAServableModelAtATinySize) {
+  const std::string work = test::temp_dir("model_card");
+  const test::Result r = test::run_shell(
+      "STEPS=2 SCENES_PER_RECIPE=1 TEXTURES=none RENDER_WIDTH=96 RENDER_HEIGHT=64 WIDTH=96 HEIGHT=64 NUM_DEPTH=8 "
+      "THREADS=2 UMVS=" + test::umvs_binary() + " bash " + UMVS_SOURCE_DIR +
+      "/scripts/experiments/train_default_model.sh " + work);
+  ASSERT_EQ(r.status, 0) << r.output;
+  const LoadedModel model = load_model(work + "/run/last.pt", torch::kCPU);
+  EXPECT_EQ(model.meta.step, 2);
+  // A held-out scene of the run (heldout.txt: comma-separated folders).
+  std::string scene = test::file_bytes(work + "/data/rendered/heldout.txt");
+  scene = scene.substr(0, scene.find_first_of(",\n"));
+  const test::Result infer = test::run_umvs("infer --data " + scene + " --checkpoint " + work + "/run/last.pt --ref 0 --threads 2 --out " + work + "/infer");
+  EXPECT_EQ(infer.status, 0) << infer.output;
+  EXPECT_TRUE(std::filesystem::exists(work + "/infer/depth_est/00000000.pfm")) << infer.output;
+}
+
+}  // namespace
+}  // namespace umvs
