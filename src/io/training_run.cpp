@@ -27,6 +27,23 @@ namespace {
 constexpr const char* kRoundStartFile = "round_start.pt";
 constexpr const char* kAnchorFile = "anchor.pt";
 
+// The labelled share of a self-training run: the model's own labels on --data, then the rendered
+// scenes of --supervised-data (exact depth), one index range after the other.
+class LabelledTuples : public TupleSource {
+ public:
+  LabelledTuples(const TupleSource& pseudo, std::unique_ptr<TupleSource> rendered)
+      : pseudo_(pseudo), rendered_(std::move(rendered)) {}
+  size_t size() const override { return pseudo_.size() + rendered_->size(); }
+  TrainingTuple tuple(size_t index, std::mt19937_64* rng) const override {
+    return index < pseudo_.size() ? pseudo_.tuple(index, rng) : rendered_->tuple(index - pseudo_.size(), rng);
+  }
+  std::string description() const override { return pseudo_.description() + " and " + rendered_->description(); }
+
+ private:
+  const TupleSource& pseudo_;
+  std::unique_ptr<TupleSource> rendered_;
+};
+
 TrainLogRow log_row(int64_t step, const LossValues& loss, double lr, double seconds) {
   TrainLogRow row;
   row.step = step;
@@ -165,7 +182,10 @@ TrainingRun::TrainingRun(TrainingRunConfig config, const std::function<TrainingD
   if (config_.self_training_every > 0) {
     to_label_ = fixed_tuples(source, config_.pseudo_label_tuples);
     pseudo_ = std::make_unique<TupleList>(to_label_, "pseudo-labelled training tuples");
-    data_.supervised.reset();
+    if (data_.supervised) {
+      data_.supervised = std::make_unique<LabelledTuples>(*pseudo_, std::move(data_.supervised));
+      messages_ << "self-training labels drawn with: " << data_.supervised->description() << "\n";
+    }
   }
   if (data_.held_out) {
     val_tuples_ = fixed_tuples(*data_.held_out, config_.val_tuples);
@@ -227,7 +247,7 @@ TrainingRun::TrainingRun(TrainingRunConfig config, const std::function<TrainingD
       return all_finite;
     });
   }
-  const TupleSource* supervised = pseudo_ ? pseudo_.get() : data_.supervised.get();
+  const TupleSource* supervised = data_.supervised ? data_.supervised.get() : pseudo_.get();
   sampler_ = std::make_unique<MixedSampler>(supervised ? *supervised : source, supervised ? &source : nullptr,
                                             config_.supervised_share, config_.seed);
   if (resume) {

@@ -443,9 +443,10 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
   const bool self_training = self_training_every > 0;
   if (self_training_every < 0) throw std::invalid_argument("--self-training-every must be >= 0");
   if (self_training) {
-    if (loss == "supervised" || args.given("supervised-data") || args.given("depth-topic")) {
-      throw std::invalid_argument("--self-training-every learns from the model's own consistent depth: it takes no "
-                                  "ground truth (--loss supervised, --supervised-data, --depth-topic)");
+    if (loss == "supervised" || args.given("depth-topic")) {
+      throw std::invalid_argument("--self-training-every learns from the model's own consistent depth: it reads no "
+                                  "ground truth of the training images (--loss supervised, --depth-topic); rendered "
+                                  "scenes with exact depth may join through --supervised-data");
     }
     data_cfg.read_ground_truth = false;  // label-free, also where the folders have depth_gt/
   } else if (args.given("anchor-unconfirmed")) {
@@ -497,6 +498,7 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
     if (args.given("supervised-data") && !eval_only) {
       umvs::TupleConfig supervised_cfg = data_cfg;
       supervised_cfg.supervised = true;
+      supervised_cfg.read_ground_truth = true;  // also when self-training leaves --data's depth_gt/ unread
       data.supervised = std::make_unique<umvs::MvsFolderSource>(args.all("supervised-data"), supervised_cfg);
       std::cerr << "supervised data: " << data.supervised->description() << ", share "
                 << args.real("supervised-share") << ", weight " << tcfg.supervised_weight << "\n";
