@@ -7,7 +7,8 @@
 #      the default model models/unsup_mvsnet.pt -> fusion) with RViz on a virtual display,
 #   4. at the end of the log sends the last keyframe too (keyframe_selector's flush service,
 #      scripts/flush_replay.py), saves the fused cloud (fusion's save_cloud service), takes an
-#      RViz screenshot, and prints `umvs eval cloud` against the scene's ground-truth surface.
+#      RViz screenshot, and prints `umvs eval cloud` against the scene's ground-truth surface and
+#      the keyframe sets processed and dropped with their p50/p90 times (inference's ~stats).
 # Usage: scripts/demo.sh [WORK_DIR]      (default /tmp/umvs_demo; it is replaced)
 # Environment: DEMO_SCENE (room), DEMO_SEED (7), DEMO_VIEWS (24), DEMO_WIDTH x DEMO_HEIGHT (640 x 512,
 #              the default model's training size; images and inference), DEMO_PLANES (128),
@@ -86,6 +87,8 @@ done
 sleep 8  # the last keyframe sets through inference and fusion
 say "bag done; the keyframe still waiting for a newer one goes out too (keyframe_selector/flush)"
 python3 scripts/flush_replay.py /unsup_mvs 120
+# Every set the selector sent, processed or dropped, and how long each took (the inference nodelet's ~stats).
+stats=$(rosservice call /unsup_mvs/inference/stats | sed -n 's/^message: *//p' | tr -d '"')
 say "saving the fused cloud"
 rosservice call /unsup_mvs/fusion/save_cloud "path: '$WORK/cloud.ply'"
 # The nodes' last words (rosout.log: "stamp LEVEL node [file] [topics: ...] message").
@@ -100,6 +103,7 @@ echo
 "$UMVS" eval cloud --est "$WORK/cloud.ply" --gt "$WORK/scene/gt.ply" --thresholds 0.02,0.05,0.1 | tee "$WORK/eval.txt"
 echo
 say "done"
+echo "inference:        ${stats:-(no answer from /unsup_mvs/inference/stats)}"
 echo "fused cloud:      $WORK/cloud.ply"
 echo "ground truth:     $WORK/scene/gt.ply"
 echo "RViz screenshot:  ${shot:-(not taken: run with DEMO_RVIZ=1 and rviz/xvfb/netpbm installed)}"

@@ -8,6 +8,7 @@
 #include <pluginlib/class_list_macros.hpp>
 #include <ros/callback_queue.h>
 #include <ros/ros.h>
+#include <std_srvs/Trigger.h>
 #include <torch/torch.h>
 
 #include <atomic>
@@ -27,10 +28,12 @@
 #include "unsup_mvs/core/device.h"
 #include "unsup_mvs/core/keyframe_pose_refiner.h"
 #include "unsup_mvs/core/latest_slot.h"
+#include "unsup_mvs/core/timing_log.h"
 #include "unsup_mvs/io/ros/ros_conversions.h"
 #include "unsup_mvs/io/checkpoint.h"
 #include "unsup_mvs/io/file_safety.h"
 #include "unsup_mvs/io/input_limits.h"
+#include "unsup_mvs/io/model_check.h"
 #include "unsup_mvs/io/plane_count.h"
 #include "unsup_mvs/ros/nodelets.h"
 #include "unsup_mvs/ros/live_settings.h"
@@ -40,21 +43,6 @@
 namespace umvs_ros {
 
 namespace {
-
-umvs::ViewInput view_from_msg(const sensor_msgs::Image& image, const sensor_msgs::CameraInfo& info,
-                              const geometry_msgs::Pose& pose, bool rectified, uint64_t max_pixels,
-                              const std::string& name) {
-  try {
-    umvs::check_image_msg(image, max_pixels);
-    const umvs::PosedImage posed = umvs::posed_image_from_msgs(image, info, pose, rectified);
-    umvs::ViewInput v;
-    v.camera = posed.camera;
-    v.image = posed.image;
-    return v;
-  } catch (const std::exception& e) {
-    throw std::invalid_argument(name + ": " + e.what());
-  }
-}
 
 bool same_settings(const umvs::DepthEstimatorConfig& a, const umvs::DepthEstimatorConfig& b) {
   return a.max_width == b.max_width && a.max_height == b.max_height && a.num_depth == b.num_depth;
@@ -151,6 +139,13 @@ class InferenceNodelet : public nodelet::Nodelet {
         [this](unsup_mvs::ReloadModel::Request& req, unsup_mvs::ReloadModel::Response& res) { return onReload(req, res); },
         ros::VoidConstPtr(), &reload_queue_);
     reload_srv_ = pnh.advertiseService(reload_options);
+    // What a run did, in one line (scripts/demo.sh prints it at the end).
+    stats_srv_ = pnh.advertiseService<std_srvs::Trigger::Request, std_srvs::Trigger::Response>(
+        "stats", [this](std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
+          res.success = true;
+          res.message = statsLine();
+          return true;
+        });
     reload_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &reload_queue_);
     reload_spinner_->start();
     worker_ = std::thread(&InferenceNodelet::work, this);
@@ -222,11 +217,15 @@ class InferenceNodelet : public nodelet::Nodelet {
     }
     std::vector<umvs::ViewInput> views;
     const auto max_pixels = static_cast<uint64_t>(max_image_pixels_);
-    views.push_back(view_from_msg(set.reference_image, set.reference_info, set.reference_pose, rectified_, max_pixels,
-                                  "reference"));
+    auto add_view = [&](const sensor_msgs::Image& image, const sensor_msgs::CameraInfo& info,
+                        const geometry_msgs::Pose& pose, const std::string& name) {
+      umvs::PosedImage posed = umvs::checked_posed_image_from_msgs(image, info, pose, rectified_, max_pixels, name);
+      views.push_back({std::move(posed.image), posed.camera});
+    };
+    add_view(set.reference_image, set.reference_info, set.reference_pose, "reference");
     for (size_t i = 0; i < set.source_images.size(); ++i) {
-      views.push_back(view_from_msg(set.source_images[i], set.source_infos[i], set.source_poses[i], rectified_,
-                                    max_pixels, "source " + std::to_string(set.source_ids.size() > i ? set.source_ids[i] : i)));
+      add_view(set.source_images[i], set.source_infos[i], set.source_poses[i],
+               "source " + std::to_string(set.source_ids.size() > i ? set.source_ids[i] : i));
     }
     umvs::DepthMap map;
     int planes = 0;
@@ -272,12 +271,11 @@ class InferenceNodelet : public nodelet::Nodelet {
 
     const double total = (ros::WallTime::now() - t0).toSec();
     const double latency = (ros::Time::now() - header.stamp).toSec();
-    ++processed_;
-    seconds_sum_ += total;
+    timings_.add(total, latency);
     NODELET_INFO_THROTTLE(2.0, "inference: keyframe %u: %dx%d depth map in %.2f s (network %.2f s%s), %.2f s after the "
                           "image; %ld done, %ld stale sets dropped, %ld failed",
                           set.reference_id, map.camera.width, map.camera.height, total, map.seconds,
-                          map.per_source_passes ? ", each source also alone" : "", latency, processed_,
+                          map.per_source_passes ? ", each source also alone" : "", latency, static_cast<long>(timings_.size()),
                           static_cast<long>(pending_->dropped()), failed_.load());
     for (size_t s = 0; s < map.source_turns.size(); ++s) {
       const umvs::SourceTurn& turn = map.source_turns[s];
@@ -324,6 +322,12 @@ class InferenceNodelet : public nodelet::Nodelet {
     return true;
   }
 
+  std::string statsLine() const {
+    return std::to_string(timings_.size()) + " keyframe sets processed, " + std::to_string(pending_->dropped()) +
+           " dropped (stale), " + std::to_string(failed_.load()) + " failed; " +
+           timings_.summary("image to depth map", "after the image's stamp");
+  }
+
   void publishDiagnostics(double total, double network, double latency, int planes, const std::string& served,
                           const std::string& refinement) {
     diagnostic_msgs::DiagnosticArray array;
@@ -339,13 +343,13 @@ class InferenceNodelet : public nodelet::Nodelet {
       p.value = v;
       status.values.push_back(p);
     };
-    kv("processed", std::to_string(processed_));
+    kv("processed", std::to_string(timings_.size()));
     kv("dropped_stale", std::to_string(pending_->dropped()));
     kv("failed", std::to_string(failed_.load()));
     kv("last_total_s", std::to_string(total));
     kv("last_network_s", std::to_string(network));
     kv("last_latency_s", std::to_string(latency));
-    kv("mean_total_s", std::to_string(seconds_sum_ / std::max(1L, processed_)));
+    kv("total_p50_p90", timings_.summary("image to depth map", "after the image's stamp"));
     kv("depth_planes", std::to_string(planes));
     kv("checkpoint", served);
     kv("pose_refinement", refinement);
@@ -368,18 +372,7 @@ class InferenceNodelet : public nodelet::Nodelet {
     umvs::LoadedModel loaded = umvs::load_model(path, device);
     Candidate c;
     c.estimator = make_estimator(loaded.model, device, config, max_planes);
-    // Smoke test: a fronto-parallel camera pair of 64x64 with 8 planes.
-    umvs::Camera cam;
-    cam.width = cam.height = 64;
-    cam.K << 50, 0, 31.5, 0, 50, 31.5, 0, 0, 1;
-    umvs::Camera cam2 = cam;
-    cam2.T_cam_world(0, 3) = -0.1;
-    auto image = torch::randint(0, 255, {64, 64, 3}, torch::kUInt8);
-    umvs::DepthEstimator probe(loaded.model, device, umvs::DepthEstimatorConfig{0, 0, 8});
-    const umvs::DepthMap test = probe.estimate({{image, cam}, {image, cam2}}, 1.0, 2.0);
-    if (!torch::isfinite(test.depth).all().item<bool>() || !torch::isfinite(test.confidence).all().item<bool>()) {
-      throw std::runtime_error("a test forward pass gives non-finite depth or confidence");
-    }
+    umvs::check_model_forward(loaded.model, device);
     c.description = "loaded " + path + " (" + loaded.format + ", " + loaded.model->config().to_string() + "), " +
                     planes_description(config.num_depth) + " on " + device.str() + ", " +
                     std::to_string(torch::get_num_threads()) + " threads";
@@ -486,8 +479,8 @@ class InferenceNodelet : public nodelet::Nodelet {
   std::unique_ptr<umvs::LatestSlot<unsup_mvs::KeyframeSetConstPtr>> pending_;
   std::thread worker_;
   std::atomic<long> failed_{0};
-  long processed_ = 0;
-  double seconds_sum_ = 0.0;
+  umvs::TimingLog timings_;  // per processed set: image to depth map, and since the image's stamp
+  ros::ServiceServer stats_srv_;
 
   std::mutex connect_mutex_;
   std::unique_ptr<image_transport::ImageTransport> it_;

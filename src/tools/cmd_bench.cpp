@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <fstream>
 #include <iomanip>
 #include <iostream>
@@ -12,12 +13,17 @@
 #include <nlohmann/json.hpp>
 #include <sys/resource.h>
 
+#include "unsup_mvs/core/depth_estimator.h"
 #include "unsup_mvs/core/device.h"
 #include "unsup_mvs/core/fast_mvsnet.h"
 #include "unsup_mvs/core/fusion.h"
 #include "unsup_mvs/core/geometry.h"
 #include "unsup_mvs/core/mvsnet.h"
+#include "unsup_mvs/core/recommended_estimator.h"
+#include "unsup_mvs/core/synth.h"
+#include "unsup_mvs/core/timing_log.h"
 #include "unsup_mvs/io/checkpoint.h"
+#include "unsup_mvs/io/plane_count.h"
 #include "unsup_mvs/tools/args.h"
 #include "unsup_mvs/tools/bench_util.h"
 #include "unsup_mvs/tools/command.h"
@@ -144,6 +150,92 @@ int bench_fusion(const Args& args, const torch::Device& device) {
   return 0;
 }
 
+
+// Pipeline case: what the inference nodelet does per keyframe set with its default settings
+// (recommended_estimator_config: at most 640x512, planes following the input, `auto` sources,
+// completion), on a rendered room (the demo's scene) so that the confidence, and with it `auto`'s
+// extra passes, is what real input gives. Each run takes the next view as the reference with its
+// best views-1 neighbours; reports p50/p90 of the whole estimate and of each stage.
+int bench_pipeline(const Args& args, const torch::Device& device) {
+  if (args.str("checkpoint").empty()) {
+    throw std::invalid_argument("--case pipeline times a trained model's behaviour (its confidence decides the extra "
+                                "passes): give --checkpoint (e.g. models/unsup_mvsnet.pt)");
+  }
+  const int W = args.integer("width"), H = args.integer("height"), V = args.integer("views");
+  const int runs = args.integer("runs"), warmup = args.integer("warmup");
+  if (V < 2) throw std::invalid_argument("--views must be >= 2 for --case pipeline");
+  SynthConfig scene_cfg;
+  scene_cfg.scene = SynthSceneType::kRoom;
+  scene_cfg.seed = 7;  // the demo's room
+  scene_cfg.num_views = std::max(V + 1, std::min(24, warmup + runs + V));
+  scene_cfg.width = W;
+  scene_cfg.height = H;
+  scene_cfg.gt_cloud_samples = 0;
+  const SynthScene scene = render_synthetic_scene(scene_cfg);
+  DepthEstimatorConfig cfg = recommended_estimator_config();
+  if (args.given("num-depth")) cfg.num_depth = args.integer("num-depth");
+  else cfg.num_depth = default_plane_count(plan_network_resize(W, H, cfg.max_width, cfg.max_height).width);
+  DepthEstimator estimator(load_model(args.str("checkpoint"), device).model, device, cfg);
+  std::vector<double> total, network, first_pass, completion, features, volume, unet;
+  int extra_passes = 0, width = 0, height = 0;
+  for (int r = 0; r < warmup + runs; ++r) {
+    const size_t ref = static_cast<size_t>(r) % scene.views.size();
+    std::vector<ViewInput> views{{scene.views[ref].image, scene.views[ref].camera}};
+    for (const auto& [source, score] : scene.pairs[ref]) {
+      if (static_cast<int>(views.size()) == V) break;
+      views.push_back({scene.views[source].image, scene.views[source].camera});
+    }
+    const auto t0 = std::chrono::steady_clock::now();
+    const DepthMap map = estimator.estimate(views, scene.depth_min, scene.depth_max);
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    if (r < warmup) continue;
+    total.push_back(seconds);
+    network.push_back(map.seconds);
+    completion.push_back(map.completion_seconds);
+    const MvsStageTimes& st = map.stages;
+    first_pass.push_back(st.features + st.cost_volume + st.regularization + st.regression + st.refinement);
+    features.push_back(st.features);
+    volume.push_back(st.cost_volume);
+    unet.push_back(st.regularization);
+    extra_passes += map.per_source_passes ? 1 : 0;
+    width = map.camera.width;
+    height = map.camera.height;
+  }
+  std::ostringstream device_name;
+  device_name << device;
+  const auto p = [](const std::vector<double>& v) { return std::make_pair(percentile(v, 50), percentile(v, 90)); };
+  const int num_depth = estimator.num_depth();
+  if (args.on("json")) {
+    auto pair = [&](const std::vector<double>& v) { return nlohmann::ordered_json{{"p50", p(v).first}, {"p90", p(v).second}}; };
+    const nlohmann::ordered_json out = {
+        {"case", "pipeline"}, {"width", W}, {"height", H}, {"num_depth", num_depth}, {"views", V},
+        {"depth_map_width", width}, {"depth_map_height", height}, {"threads", torch::get_num_threads()},
+        {"device", device_name.str()}, {"runs", runs}, {"runs_with_per_source_passes", extra_passes},
+        {"total_s", pair(total)}, {"network_all_passes_s", pair(network)}, {"first_pass_s", pair(first_pass)},
+        {"completion_s", pair(completion)},
+        {"first_pass_stages_p50_s", {{"features", p(features).first}, {"cost_volume", p(volume).first},
+                                     {"unet3d", p(unet).first}}},
+        {"peak_rss_mib", peak_rss_mib()}};
+    std::cout << out.dump() << "\n";
+  } else {
+    auto line = [&](const char* name, const std::vector<double>& v) {
+      std::cout << "  " << std::left << std::setw(34) << name << std::right << std::setprecision(3) << "p50 " << p(v).first
+                << " s, p90 " << p(v).second << " s\n";
+    };
+    std::cout << std::fixed << "pipeline (the inference nodelet's defaults) " << W << "x" << H << " images, D=" << num_depth
+              << ", " << V << " views, device=" << device_name.str() << " threads=" << torch::get_num_threads() << ": "
+              << width << "x" << height << " depth maps, " << runs << " runs (" << extra_passes
+              << " with the per-source passes of auto), peak RSS " << std::setprecision(0) << peak_rss_mib() << " MiB\n";
+    line("image to depth map (estimate)", total);
+    line("network, every pass", network);
+    line("network, first pass", first_pass);
+    line("  features", features);
+    line("  cost volume", volume);
+    line("  3-D U-Net", unet);
+    line("completion", completion);
+  }
+  return 0;
+}
 }  // namespace
 }  // namespace umvs
 
@@ -154,7 +246,9 @@ UMVS_COMMAND(bench, "time and memory of the network on synthetic input") {
                   "GFLOP/s (convolutions), the median time of each stage (fast path), minor page faults per\n"
                   "run and peak memory (the process's peak RSS, host memory also on CUDA). --path both interleaves\n"
                   "the inference path and the autograd (training) path and reports both and their ratio.");
-  args.option("case", "network", "what to time: network | fusion")
+  args.option("case", "network",
+              "what to time: network | fusion | pipeline (the inference nodelet's defaults on a rendered room, "
+              "with --checkpoint: every pass, completion, p50/p90)")
       .option("width", "640", "image width (multiple of 32)")
       .option("height", "512", "image height (multiple of 32)")
       .option("num-depth", "128", "depth hypotheses")
@@ -184,6 +278,7 @@ UMVS_COMMAND(bench, "time and memory of the network on synthetic input") {
   const int runs = args.integer("runs");
   if (runs < 1) throw std::invalid_argument("--runs must be >= 1");
   if (args.str("case") == "fusion") return umvs::bench_fusion(args, device);
+  if (args.str("case") == "pipeline") return umvs::bench_pipeline(args, device);
   if (args.str("case") != "network") throw std::invalid_argument("unknown --case '" + args.str("case") + "'");
   const std::string path = args.str("path");
   if (path != "fast" && path != "autograd" && path != "both") throw std::invalid_argument("unknown --path '" + path + "' (fast|autograd|both)");

@@ -1,11 +1,14 @@
 // rostest for the inference node: lazy subscription, reload_model (refuses a corrupt checkpoint and
 // keeps the old model), DepthEstimate outputs (stamps, frames, sizes, intrinsics, ranges), bad
 // keyframe sets (unsupported encoding, NaN pose, impossible depth range) logged and skipped, and
-// latest-wins when sets arrive faster than the network runs.
+// latest-wins when sets arrive faster than the network runs, with ~stats accounting for every set.
 #include <torch/torch.h>
 
 #include <cmath>
+#include <cstdio>
 #include <fstream>
+
+#include <std_srvs/Trigger.h>
 
 #include "rostest_util.h"
 #include "test_messages.h"
@@ -175,6 +178,22 @@ TEST_F(InferenceTest, NewestSetsWinWhenBusy) {
   EXPECT_LE(estimates_.size(), 6u);
   for (size_t i = 1; i < estimates_.size(); ++i) EXPECT_LT(estimates_[i - 1]->keyframe_id, estimates_[i]->keyframe_id);
   EXPECT_EQ(estimates_.back()->keyframe_id, 105u);
+  // ~stats accounts for every set: this test's six are processed or dropped (earlier tests' too).
+  ros::ServiceClient stats = nh_.serviceClient<std_srvs::Trigger>("/inference/stats");
+  std_srvs::Trigger call;
+  ASSERT_TRUE(stats.call(call));
+  long processed = -1, dropped = -1, failed = -1;
+  double p50 = -1, p90 = -1;
+  ASSERT_EQ(std::sscanf(call.response.message.c_str(),
+                        "%ld keyframe sets processed, %ld dropped (stale), %ld failed; image to depth map p50 %lf s, "
+                        "p90 %lf s",
+                        &processed, &dropped, &failed, &p50, &p90),
+            5)
+      << call.response.message;
+  EXPECT_GE(processed, static_cast<long>(estimates_.size()));
+  EXPECT_GE(processed + dropped, 6L) << call.response.message;
+  EXPECT_GT(p50, 0.0);
+  EXPECT_GE(p90, p50);
 }
 
 TEST_F(InferenceTest, RefinedPosesAreSentWithTheirEstimates) {

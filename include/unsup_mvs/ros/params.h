@@ -10,6 +10,7 @@
 #include "unsup_mvs/core/depth_estimator.h"
 #include "unsup_mvs/core/fusion.h"
 #include "unsup_mvs/core/keyframes.h"
+#include "unsup_mvs/core/recommended_estimator.h"
 #include "unsup_mvs/io/cloud_filter.h"
 #include "unsup_mvs/io/fine_tune_job.h"
 #include "unsup_mvs/io/occupancy_map.h"
@@ -30,17 +31,8 @@ umvs::KeyframeConfig keyframe_config_from_ros(const ros::NodeHandle& nh);
 umvs::KeyframeStreamConfig keyframe_stream_config_from_ros(const ros::NodeHandle& nh);
 umvs::FusionConfig fusion_config_from_ros(const ros::NodeHandle& nh);
 
-// The inference nodelet's estimator: at most 640x512, planes following the input, one pass per
-// source where the one pass is unsure, the unsure pixels completed from the confident ones (as
-// `umvs infer`).
-inline umvs::DepthEstimatorConfig inference_estimator_defaults() {
-  umvs::DepthEstimatorConfig c{640, 512, 0};
-  c.completion.min_confidence = umvs::kRecommendedCompletionConfidence;
-  // `auto`, as `umvs infer`. Since the trainer's train_args label and judge with one pass per source
-  // too, the models its rule reloads beat what `auto` served (docs/results.md).
-  c.source_combination = umvs::kRecommendedSourceCombination;
-  return c;
-}
+// The inference nodelet's estimator: the product's recommended settings (as `umvs infer`).
+inline umvs::DepthEstimatorConfig inference_estimator_defaults() { return umvs::recommended_estimator_config(); }
 
 // The inference nodelet's parameters (docs/ros.md), validated: validate() throws
 // std::invalid_argument naming the parameter.

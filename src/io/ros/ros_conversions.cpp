@@ -260,6 +260,17 @@ PosedImage posed_image_from_msgs(const sensor_msgs::Image& image, const sensor_m
   return posed_image_from_msgs(image, info, pose_to_matrix(T_world_camera), rectified);
 }
 
+PosedImage checked_posed_image_from_msgs(const sensor_msgs::Image& image, const sensor_msgs::CameraInfo& info,
+                                         const geometry_msgs::Pose& T_world_camera, bool rectified, uint64_t max_pixels,
+                                         const std::string& name) {
+  try {
+    check_image_msg(image, max_pixels);
+    return posed_image_from_msgs(image, info, T_world_camera, rectified);
+  } catch (const std::exception& e) {
+    throw std::invalid_argument(name + ": " + e.what());
+  }
+}
+
 PosedImage posed_image_from_msgs(const sensor_msgs::Image& image, const sensor_msgs::CameraInfo& info,
                                  const Eigen::Matrix4d& T_world_camera, bool rectified) {
   PosedImage out;

@@ -82,5 +82,10 @@ PosedImage posed_image_from_msgs(const sensor_msgs::Image& image, const sensor_m
                                  const geometry_msgs::Pose& T_world_camera, bool rectified);
 PosedImage posed_image_from_msgs(const sensor_msgs::Image& image, const sensor_msgs::CameraInfo& info,
                                  const Eigen::Matrix4d& T_world_camera, bool rectified);
+// An image of a message the node received: check_image_msg(image, max_pixels), then the above;
+// the error names the view (`name`: "reference", "source 12") before the problem.
+PosedImage checked_posed_image_from_msgs(const sensor_msgs::Image& image, const sensor_msgs::CameraInfo& info,
+                                         const geometry_msgs::Pose& T_world_camera, bool rectified, uint64_t max_pixels,
+                                         const std::string& name);
 
 }  // namespace umvs
