@@ -35,7 +35,7 @@ TEST(CliHelp, EverySubcommandPrintsCli11HelpWithItsDefaults) {
       {"infer", "--device TEXT=cpu"},
       {"render", "--height NUMBER=480"},
       {"synth", "--scene TEXT=room"},
-      {"train", "--steps NUMBER=10000"},
+      {"train", "--steps INT=10000"},           // bound to an int field: INT
   };
 #ifdef UMVS_HAVE_ROS
   shown["bag"] = "--rate NUMBER=2";

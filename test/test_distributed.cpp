@@ -207,15 +207,16 @@ TEST(Distributed, AnyFailureOfRankZerosFolderCheckEndsTheOtherRanksAtOnce) {
   SKIP_WITHOUT_GLOO();
   const std::string out = test::temp_dir("distributed_bad_folder") + "/run";
   run_two_ranks(out, 2);
-  // A damaged run_config.txt: rank 0 fails reading it (a runtime_error, not a refusal).
-  std::ofstream(out + "/" + kRunConfigFile, std::ios::app) << "this line has no equals sign\n";
+  // A damaged run_config.json: rank 0 fails reading it (a runtime_error, not a refusal).
+  std::ofstream(out + "/" + kRunConfigFile, std::ios::app) << "this line is no JSON\n";
   const auto t0 = std::chrono::steady_clock::now();
   auto job = start_two_ranks(out, 4, [](TrainingRunConfig& c) { c.start = RunStart::kResume; });
   // Both fail long before the 60 s timeout of the group.
   EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::seconds(30));
-  EXPECT_THAT(job->error[0], testing::HasSubstr("expected name=value"));
+  const std::string damaged = "run configuration '" + out + "/" + kRunConfigFile + "' cannot be read: ";
+  EXPECT_THAT(job->error[0], testing::HasSubstr(damaged));
   EXPECT_THAT(job->error[1], testing::HasSubstr("rank 0 refused the run: "));
-  EXPECT_THAT(job->error[1], testing::HasSubstr("expected name=value"));
+  EXPECT_THAT(job->error[1], testing::HasSubstr(damaged));
 }
 
 TEST(Distributed, AKilledRankEndsTheOtherWithAClearErrorInsteadOfAHang) {
@@ -270,7 +271,7 @@ TEST(Distributed, NprocRunsTheJobAndAFailingRankFailsIt) {
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_THAT(r.output, testing::HasSubstr("all 2 ranks finished"));
   EXPECT_EQ(load_model(dir + "/run/last.pt", torch::kCPU).meta.step, 2);
-  EXPECT_EQ(read_run_config(dir + "/run/" + kRunConfigFile).at("world-size"), "2");
+  EXPECT_EQ(read_run_record(dir + "/run").value().options.at("world-size"), 2);
 
   // The launcher on its own: rank 1 fails at once, rank 0 would run for 300 s and is stopped.
   std::ostringstream out;

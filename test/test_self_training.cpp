@@ -32,6 +32,9 @@ std::string file_text(const std::string& path) {
   return std::string(std::istreambuf_iterator<char>(in), {});
 }
 
+// The options recorded in run folder `out` (its run_config.json).
+RunOptions recorded(const std::string& out) { return read_run_record(out).value().options; }
+
 // Every tuple of a rendered room without ground truth (4 loss views, unaugmented), as self-training
 // sees a robot's unlabelled images.
 std::vector<TrainingTuple> unlabelled_room_tuples(const std::string& name, int seed) {
@@ -270,20 +273,19 @@ TEST(SelfTraining, AnchoredRunKeepsItsStartModelAndResumesWithinARoundExactly) {
   EXPECT_GT(plain_differs, 0.0) << "the anchors changed nothing";
   for (const auto& p : init->named_parameters()) EXPECT_TRUE(torch::equal(p.value(), pa[p.key()])) << p.key();
   EXPECT_FALSE(std::filesystem::exists(out + "/plain/anchor.pt"));
-  // Recorded as versions with a default-off flag recorded it, so that their runs still resume:
-  // "1" when anchored, empty for plain self-training and for runs without self-training.
-  EXPECT_NE(file_text(out + "/whole/run_config.txt").find("\nanchor-unconfirmed=1\n"), std::string::npos);
-  EXPECT_NE(file_text(out + "/plain/run_config.txt").find("\nanchor-unconfirmed=\n"), std::string::npos);
-  // The anchors' confidence floor (0.5 by default) is recorded for anchored runs only.
-  EXPECT_NE(file_text(out + "/whole/run_config.txt").find("\nanchor-min-confidence=0.5\n"), std::string::npos);
-  EXPECT_EQ(file_text(out + "/plain/run_config.txt").find("anchor-min-confidence"), std::string::npos);
-  // So a plain run (or a run of an older version, recorded alike) resumes as it was made, and the
+  // Recorded as what the run does: anchored or not (not for plain self-training, nor for runs
+  // without self-training), and the anchors' confidence floor (0.5 by default; 0 when not anchored).
+  EXPECT_EQ(recorded(out + "/whole").at("anchor-unconfirmed"), true);
+  EXPECT_EQ(recorded(out + "/plain").at("anchor-unconfirmed"), false);
+  EXPECT_EQ(recorded(out + "/whole").at("anchor-min-confidence"), 0.5);
+  EXPECT_EQ(recorded(out + "/plain").at("anchor-min-confidence"), 0.0);
+  // So a plain run (or a run of an older version, upgraded alike) resumes as it was made, and the
   // default does not turn it into an anchored one unasked.
   EXPECT_NE(train("--self-training-every 3 --steps 6 --resume --out " + out + "/plain"), 0);
-  EXPECT_NE(file_text(log).find("--anchor-unconfirmed: the run in this folder has ''"), std::string::npos)
+  EXPECT_NE(file_text(log).find("--anchor-unconfirmed: the run in this folder has '0', now '1'"), std::string::npos)
       << file_text(log);
   // One refusal names every option that differs (the default floor comes with the default anchoring).
-  EXPECT_NE(file_text(log).find("--anchor-min-confidence: the run in this folder has (not set), now '0.5'; "
+  EXPECT_NE(file_text(log).find("--anchor-min-confidence: the run in this folder has '0', now '0.5'; "
                                 "--anchor-unconfirmed"),
             std::string::npos)
       << file_text(log);
@@ -293,7 +295,7 @@ TEST(SelfTraining, AnchoredRunKeepsItsStartModelAndResumesWithinARoundExactly) {
   ASSERT_EQ(train("--steps 1 --overwrite --out " + out + "/whole"), 0) << file_text(log);
   EXPECT_FALSE(std::filesystem::exists(out + "/whole/anchor.pt"));
   EXPECT_FALSE(std::filesystem::exists(out + "/whole/round_start.pt"));
-  EXPECT_NE(file_text(out + "/whole/run_config.txt").find("\nanchor-unconfirmed=\n"), std::string::npos);
+  EXPECT_EQ(recorded(out + "/whole").at("anchor-unconfirmed"), false);
   // Without self-training there is nothing to anchor; a resume that lost anchor.pt is refused.
   EXPECT_NE(train("--anchor-unconfirmed 1 --steps 2 --out " + out + "/refused"), 0);
   EXPECT_NE(file_text(log).find("--self-training-every"), std::string::npos) << file_text(log);
@@ -314,10 +316,10 @@ TEST(SelfTraining, AnchoredRunKeepsItsStartModelAndResumesWithinARoundExactly) {
       << file_text(log);
   EXPECT_NE(file_text(log).find("where its confidence is at least 0.7"), std::string::npos)
       << file_text(log);
-  EXPECT_NE(file_text(out + "/confident/run_config.txt").find("\nanchor-min-confidence=0.7\n"), std::string::npos);
-  EXPECT_EQ(file_text(out + "/whole/run_config.txt").find("anchor-min-confidence"), std::string::npos)
+  EXPECT_EQ(recorded(out + "/confident").at("anchor-min-confidence"), 0.7);
+  EXPECT_EQ(recorded(out + "/whole").at("anchor-min-confidence"), 0.0)
       << "a run without self-training has no anchors to floor";
-  // --anchor-unseen adds to a floor's anchors: refused without one, recorded only when on.
+  // --anchor-unseen adds to a floor's anchors: refused without one, recorded as on only with one.
   EXPECT_NE(train(anchored + " --anchor-min-confidence 0 --anchor-unseen 1 --steps 2 --out " + out + "/refused"), 0);
   EXPECT_NE(file_text(log).find("--anchor-unseen adds pixels"), std::string::npos) << file_text(log);
   EXPECT_NE(train(anchored + " --anchor-unseen 2 --steps 2 --out " + out + "/refused"), 0);
@@ -326,17 +328,17 @@ TEST(SelfTraining, AnchoredRunKeepsItsStartModelAndResumesWithinARoundExactly) {
   ASSERT_EQ(train(anchored + " --anchor-unseen 1 --steps 1 --out " + out + "/unseen"), 0) << file_text(log);
   EXPECT_NE(file_text(log).find("where its confidence is at least 0.5 or no loss view sees them"), std::string::npos)
       << file_text(log);
-  EXPECT_NE(file_text(out + "/unseen/run_config.txt").find("\nanchor-unseen=1\n"), std::string::npos);
-  EXPECT_EQ(file_text(out + "/confident/run_config.txt").find("anchor-unseen"), std::string::npos);
+  EXPECT_EQ(recorded(out + "/unseen").at("anchor-unseen"), true);
+  EXPECT_EQ(recorded(out + "/confident").at("anchor-unseen"), false);
   // An anchored run without a recorded floor (0, as every anchored run before the 0.5 default)
   // resumed without the option continues with its own floor and ends where it would have.
   const std::string every_pixel = anchored + " --anchor-min-confidence 0";
   ASSERT_EQ(train(every_pixel + " --steps 4 --out " + out + "/every_whole"), 0) << file_text(log);
-  EXPECT_EQ(file_text(out + "/every_whole/run_config.txt").find("anchor-min-confidence"), std::string::npos);
+  EXPECT_EQ(recorded(out + "/every_whole").at("anchor-min-confidence"), 0.0);
   ASSERT_EQ(train(every_pixel + " --steps 2 --out " + out + "/every_resumed"), 0) << file_text(log);
   EXPECT_NE(train(anchored + " --anchor-min-confidence 0.5 --steps 4 --resume --out " + out + "/every_resumed"), 0)
       << "a floor the run was not made with is refused";
-  EXPECT_NE(file_text(log).find("--anchor-min-confidence: the run in this folder has (not set), now '0.5'"),
+  EXPECT_NE(file_text(log).find("--anchor-min-confidence: the run in this folder has '0', now '0.5'"),
             std::string::npos)
       << file_text(log);
   ASSERT_EQ(train(anchored + " --steps 4 --resume --out " + out + "/every_resumed"), 0) << file_text(log);

@@ -26,6 +26,9 @@ using test::scene;
 using test::snapshot;
 using test::write_bytes;
 
+// The options recorded in run folder `out` (its run_config.json).
+RunOptions recorded(const std::string& out) { return read_run_record(out).value().options; }
+
 // ---------------------------------------------------------------------------------------------
 // umvs train: run folders and arguments
 
@@ -35,7 +38,7 @@ TEST(TrainRunFolder, ANonEmptyFolderIsOnlyReplacedWithOverwrite) {
   const std::string common = "train --data " + data + " --val " + data + kTrainFlags + " --out " + out;
   ASSERT_EQ(run_umvs(common + " --steps 2").status, 0);
   const auto before = snapshot(out);
-  ASSERT_TRUE(before.count(out + "/best.pt") && before.count(out + "/train_log.csv") && before.count(out + "/run_config.txt"));
+  ASSERT_TRUE(before.count(out + "/best.pt") && before.count(out + "/train_log.csv") && before.count(out + "/run_config.json"));
 
   // The same command again, without --resume: refused, naming the way out; nothing changed.
   Result again = run_umvs(common + " --steps 4 --seed 7");
@@ -59,7 +62,7 @@ TEST(TrainRunFolder, ANonEmptyFolderIsOnlyReplacedWithOverwrite) {
   int lines = 0;
   for (std::string l; std::getline(log, l);) ++lines;
   EXPECT_EQ(lines, 5);
-  EXPECT_EQ(read_run_config(out + "/run_config.txt").at("seed"), "7");
+  EXPECT_EQ(recorded(out).at("seed"), 7);
   EXPECT_EQ(run_umvs(common + " --steps 4 --resume --overwrite").status, 2);
 }
 
@@ -87,9 +90,9 @@ TEST(TrainRunFolder, ResumeWithOtherOptionsIsRefusedNamingTheOption) {
   const std::string common = "train --data " + data + " --val " + data + kTrainFlags + " --out " + out;
   ASSERT_EQ(run_umvs(common + " --steps 2").status, 0);
   const auto before = snapshot(out);
-  const RunConfig stored = read_run_config(out + "/run_config.txt");
-  EXPECT_EQ(stored.at("width"), "96");
-  EXPECT_EQ(stored.at("data"), fs::absolute(data).lexically_normal().string());
+  const RunOptions stored = recorded(out);
+  EXPECT_EQ(stored.at("width"), 96);
+  EXPECT_EQ(stored.at("data"), RunOptions::array({fs::absolute(data).lexically_normal().string()}));
 
   struct Change {
     std::string flags, option;
@@ -109,13 +112,14 @@ TEST(TrainRunFolder, ResumeWithOtherOptionsIsRefusedNamingTheOption) {
 }
 
 TEST(TrainRunFolder, BestModelIsNeverComparedUnderAnotherMetric) {
-  // A run validated on ground truth (best.pt chosen by depth error), written before run_config.txt
-  // existed (removed here), resumed without --val: its training loss must not replace best.pt.
+  // A run validated on ground truth (best.pt chosen by depth error), written before runs recorded
+  // their options (run_config.json removed here), resumed without --val: its training loss must
+  // not replace best.pt.
   const std::string data = scene("bm_data");
   const std::string out = test::temp_dir("bm_out") + "/run";
   ASSERT_EQ(run_umvs("train --data " + data + " --val " + data + kTrainFlags + " --steps 2 --out " + out).status, 0);
   ASSERT_TRUE(load_model(out + "/best.pt", torch::kCPU).meta.metrics.count("val_abs_err"));
-  fs::remove(out + "/run_config.txt");
+  fs::remove(out + "/run_config.json");
   const auto before = snapshot(out);
   Result r = run_umvs("train --data " + data + kTrainFlags + " --steps 4 --resume --out " + out);
   EXPECT_EQ(r.status, 2) << r.output;
@@ -132,7 +136,7 @@ TEST(TrainArguments, PlaneCountFollowsTheWidthAndAResumeKeepsTheRuns) {
   Result by_default = run_umvs("train --data " + data + flags + " --steps 2 --out " + dir + "/default");
   ASSERT_EQ(by_default.status, 0) << by_default.output;
   EXPECT_TRUE(contains(by_default.output, "depth planes: 16 (default for 96 wide")) << by_default.output;
-  EXPECT_EQ(read_run_config(dir + "/default/run_config.txt").at("num-depth"), "16");
+  EXPECT_EQ(recorded(dir + "/default").at("num-depth"), 16);
   EXPECT_EQ(load_model(dir + "/default/last.pt", torch::kCPU).model->config().num_depth, 16);
 
   // Scoring a checkpoint follows the width the same way.
@@ -161,7 +165,7 @@ TEST(TrainArguments, PlaneCountFollowsTheWidthAndAResumeKeepsTheRuns) {
   EXPECT_FALSE(fs::exists(dir + "/own_size"));
 }
 
-TEST(TrainArguments, ZoomRangeIsCheckedFirstAndRecordedOnlyWhenNotTheDefault) {
+TEST(TrainArguments, ZoomRangeIsCheckedFirstAndRecorded) {
   const std::string data = scene("train_zoom_data");  // 96x64
   const std::string dir = test::temp_dir("train_zoom");
   const std::string flags = " --width 64 --height 32 --num-depth 8 --views-loss 3 --top-k 2 --threads 1 --save-every 2";
@@ -174,21 +178,21 @@ TEST(TrainArguments, ZoomRangeIsCheckedFirstAndRecordedOnlyWhenNotTheDefault) {
   EXPECT_TRUE(contains(no_augment.output, "--augment 0 crops nothing")) << no_augment.output;
   EXPECT_FALSE(fs::exists(dir + "/plain"));
 
-  // A run with its own range records it (a resume must keep it); the default range is not
-  // recorded, so that runs of versions before the options resume.
+  // The range is recorded (a resume must keep it); runs of versions that recorded only a range
+  // other than 1-1.25 resume with that default (TrainRunConfig tests).
   ASSERT_EQ(run_umvs("train --data " + data + flags + " --min-zoom 1.5 --max-zoom 1.5 --steps 2 --out " + dir + "/crops").status, 0);
-  EXPECT_EQ(read_run_config(dir + "/crops/run_config.txt").at("min-zoom"), "1.5");
+  EXPECT_EQ(recorded(dir + "/crops").at("min-zoom"), 1.5);
   Result changed = run_umvs("train --data " + data + flags + " --steps 4 --resume --out " + dir + "/crops");
   EXPECT_EQ(changed.status, 2) << changed.output;
-  EXPECT_TRUE(contains(changed.output, "--min-zoom: the run in this folder has '1.5', now (not set)")) << changed.output;
+  EXPECT_TRUE(contains(changed.output, "--min-zoom: the run in this folder has '1.5', now '1'")) << changed.output;
   ASSERT_EQ(run_umvs("train --data " + data + flags + " --steps 2 --out " + dir + "/default").status, 0);
-  EXPECT_EQ(read_run_config(dir + "/default/run_config.txt").count("min-zoom"), 0u);
-  EXPECT_EQ(read_run_config(dir + "/default/run_config.txt").count("max-zoom"), 0u);
+  EXPECT_EQ(recorded(dir + "/default").at("min-zoom"), 1.0);
+  EXPECT_EQ(recorded(dir + "/default").at("max-zoom"), 1.25);
 }
 
-// The probability-volume terms change what a run computes: recorded when on (a resume must keep
-// them), not recorded when off, so that runs of versions before the options resume.
-TEST(TrainArguments, VolumeTermsAndFrozenBatchNormAreCheckedFirstAndRecordedOnlyWhenOn) {
+// The probability-volume terms change what a run computes: recorded (a resume must keep them); runs
+// of versions that recorded them only when on resume with them off (TrainRunConfig tests).
+TEST(TrainArguments, VolumeTermsAndFrozenBatchNormAreCheckedFirstAndRecorded) {
   const std::string data = scene("train_volume_terms_data");  // 96x64
   const std::string dir = test::temp_dir("train_volume_terms");
   const std::string flags = " --width 64 --height 32 --num-depth 8 --views-loss 3 --top-k 2 --threads 1 --save-every 2";
@@ -202,9 +206,9 @@ TEST(TrainArguments, VolumeTermsAndFrozenBatchNormAreCheckedFirstAndRecordedOnly
   EXPECT_FALSE(fs::exists(dir + "/batchnorm"));
   ASSERT_EQ(run_umvs("train --data " + data + flags + " --plane-loss-weight 0.3 --entropy-weight 0.01 --batchnorm frozen " +
                      "--steps 2 --out " + dir + "/terms").status, 0);
-  const RunConfig stored = read_run_config(dir + "/terms/run_config.txt");
-  EXPECT_EQ(stored.at("plane-loss-weight"), "0.3");
-  EXPECT_EQ(stored.at("entropy-weight"), "0.01");
+  const RunOptions stored = recorded(dir + "/terms");
+  EXPECT_EQ(stored.at("plane-loss-weight"), 0.3);
+  EXPECT_EQ(stored.at("entropy-weight"), 0.01);
   EXPECT_EQ(stored.at("batchnorm"), "frozen");
   const auto log = read_csv_rows(dir + "/terms/train_log.csv");
   ASSERT_FALSE(log.empty());
@@ -212,11 +216,11 @@ TEST(TrainArguments, VolumeTermsAndFrozenBatchNormAreCheckedFirstAndRecordedOnly
   Result dropped = run_umvs("train --data " + data + flags + " --entropy-weight 0.01 --batchnorm frozen --steps 4 --resume --out " +
                             dir + "/terms");
   EXPECT_EQ(dropped.status, 2) << dropped.output;
-  EXPECT_TRUE(contains(dropped.output, "--plane-loss-weight: the run in this folder has '0.3', now (not set)")) << dropped.output;
+  EXPECT_TRUE(contains(dropped.output, "--plane-loss-weight: the run in this folder has '0.3', now '0'")) << dropped.output;
   ASSERT_EQ(run_umvs("train --data " + data + flags + " --steps 2 --out " + dir + "/default").status, 0);
-  EXPECT_EQ(read_run_config(dir + "/default/run_config.txt").count("plane-loss-weight"), 0u);
-  EXPECT_EQ(read_run_config(dir + "/default/run_config.txt").count("entropy-weight"), 0u);
-  EXPECT_EQ(read_run_config(dir + "/default/run_config.txt").count("batchnorm"), 0u);
+  EXPECT_EQ(recorded(dir + "/default").at("plane-loss-weight"), 0.0);
+  EXPECT_EQ(recorded(dir + "/default").at("entropy-weight"), 0.0);
+  EXPECT_EQ(recorded(dir + "/default").at("batchnorm"), "train");
   EXPECT_FALSE(read_csv_rows(dir + "/default/train_log.csv").back().number("plane_loss").has_value());
 }
 

@@ -161,7 +161,7 @@ TEST(TrainingRun, LogsEveryStepResumesAndRefusesAnOccupiedFolderBeforeReadingDat
   config.data.views_loss = 3;
   config.steps = 3;
   config.save_every = 2;
-  config.options = {{"steps", "3"}, {"data", data}};
+  config.options = {{"steps", 3}, {"data", data}};
   config.may_change_on_resume = {"steps"};
   int opened = 0;
   auto open_data = [&] {
@@ -206,7 +206,7 @@ TEST(TrainingRun, LogsEveryStepResumesAndRefusesAnOccupiedFolderBeforeReadingDat
   // A resume continues the log from the checkpoint.
   config.start = RunStart::kResume;
   config.steps = 4;
-  config.options["steps"] = "4";
+  config.options["steps"] = 4;
   TrainingRun resumed(config, open_data, messages);
   EXPECT_EQ(resumed.step(), 3);
   EXPECT_EQ(resumed.run().step, 4);

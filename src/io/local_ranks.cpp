@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cstdlib>
 #include <deque>
+#include <filesystem>
 #include <memory>
 #include <ostream>
 #include <stdexcept>
@@ -84,6 +85,31 @@ LocalRanksResult run_local_ranks(const std::vector<std::string>& argv, int ranks
     if (quiet && running > 0) std::this_thread::sleep_for(std::chrono::milliseconds(20));
   }
   return result;
+}
+
+int rerun_as_local_ranks(const std::string& command, int argc, char** argv, int ranks, std::ostream& log,
+                         std::ostream& out) {
+  std::error_code ec;
+  const std::string self = std::filesystem::read_symlink("/proc/self/exe", ec).string();
+  if (ec) throw std::runtime_error("--nproc: cannot find this program (/proc/self/exe): " + ec.message());
+  std::vector<std::string> child = {self, command};
+  for (int i = 0; i < argc; ++i) {
+    const std::string arg = argv[i];
+    if (arg == "--nproc") {
+      ++i;  // and its value
+      continue;
+    }
+    if (arg.rfind("--nproc=", 0) == 0) continue;
+    child.push_back(arg);
+  }
+  log << "starting " << ranks << " ranks on this machine (rank 0's output follows)\n";
+  const LocalRanksResult result = run_local_ranks(child, ranks, log);
+  if (result.failed_rank >= 0) {  // the failing rank's exit status (2: bad usage), 1 when it was killed
+    log << "umvs " << command << ": error: " << result.message << "\n";
+    return result.exit_status > 0 ? result.exit_status : 1;
+  }
+  out << "all " << ranks << " ranks finished\n";
+  return 0;
 }
 
 }  // namespace umvs

@@ -1,8 +1,11 @@
 #include "unsup_mvs/io/run_folder.h"
 
 #include <algorithm>
+#include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <set>
 #include <sstream>
 #include <stdexcept>
 
@@ -14,31 +17,54 @@ namespace umvs {
 namespace fs = std::filesystem;
 
 const std::vector<std::string>& run_files() {
-  static const std::vector<std::string> files = {"last.pt", "best.pt", "blended.pt", "round_start.pt", "anchor.pt",
-                                                 "train_log.csv", "loss_curve.png", kRunConfigFile};
+  static const std::vector<std::string> files = {"last.pt",       "best.pt",        "blended.pt",
+                                                 "round_start.pt", "anchor.pt",      "train_log.csv",
+                                                 "loss_curve.png", kRunConfigFile,   kLegacyRunConfigFile};
   return files;
 }
 
-std::string run_config_difference(const RunConfig& stored, const RunConfig& current,
-                                  const std::vector<std::string>& may_change) {
-  RunConfig all = stored;
-  all.insert(current.begin(), current.end());
+std::string option_text(const nlohmann::json& value) {
+  if (value.is_string()) return value.get<std::string>();
+  if (value.is_boolean()) return value.get<bool>() ? "1" : "0";
+  if (value.is_number_float()) {  // the shortest text that reads back as the value
+    const double v = value.get<double>();
+    char text[32];
+    for (int digits = 6; digits <= 17; ++digits) {
+      std::snprintf(text, sizeof(text), "%.*g", digits, v);
+      if (std::strtod(text, nullptr) == v) break;
+    }
+    return text;
+  }
+  if (value.is_array()) {
+    std::string joined;
+    for (const auto& item : value) joined += (joined.empty() ? "" : ",") + option_text(item);
+    return joined;
+  }
+  return value.dump();
+}
+
+std::string run_options_difference(const RunOptions& stored, const RunOptions& current,
+                                   const std::vector<std::string>& may_change) {
+  std::set<std::string> names;
+  for (const auto& entry : stored.items()) names.insert(entry.key());
+  for (const auto& entry : current.items()) names.insert(entry.key());
   // Every difference, not only the first: one refusal tells the whole resume command.
   std::string differences;
-  for (const auto& entry : all) {
-    const std::string& name = entry.first;
+  for (const std::string& name : names) {
     if (std::find(may_change.begin(), may_change.end(), name) != may_change.end()) continue;
     const auto a = stored.find(name), b = current.find(name);
-    const std::string was = a == stored.end() ? "(not set)" : "'" + a->second + "'";
-    const std::string now = b == current.end() ? "(not set)" : "'" + b->second + "'";
-    if (was == now) continue;
+    const bool has_a = a != stored.end(), has_b = b != current.end();
+    if (has_a && has_b && *a == *b) continue;  // (numbers compare by value: 1 == 1.0)
+    const std::string was = has_a ? "'" + option_text(*a) + "'" : "(not set)";
+    const std::string now = has_b ? "'" + option_text(*b) + "'" : "(not set)";
     differences += (differences.empty() ? "" : "; ") + ("--" + name + ": the run in this folder has " + was + ", now " + now);
   }
   return differences;
 }
 
-void check_run_folder(const std::string& out, RunStart start, const RunConfig& config,
-                      const std::vector<std::string>& may_change, std::string* warnings) {
+void check_run_folder(const std::string& out, RunStart start, const RunOptions& options,
+                      const std::vector<std::string>& may_change, const RunRecordUpgrade& upgrade,
+                      std::string* warnings) {
   std::error_code ec;
   const auto status = fs::status(out, ec);
   const bool exists = fs::exists(status);
@@ -62,19 +88,62 @@ void check_run_folder(const std::string& out, RunStart start, const RunConfig& c
   if (start != RunStart::kResume) return;
   const std::string last = (fs::path(out) / "last.pt").string();
   if (!fs::exists(last)) throw std::invalid_argument("--resume: " + last + " does not exist");
-  const std::string stored_path = (fs::path(out) / kRunConfigFile).string();
-  if (!fs::exists(stored_path)) {
+  const auto record = read_run_record(out);
+  if (!record) {
     if (warnings) {
-      *warnings += "--resume: " + out + " has no " + kRunConfigFile +
+      *warnings += "--resume: " + out + " has no " + kRunConfigFile + " or " + kLegacyRunConfigFile +
                    " (written by an older umvs): the options cannot be compared with the run's; they are recorded now\n";
     }
     return;
   }
-  const std::string diff = run_config_difference(read_run_config(stored_path), config, may_change);
+  const RunOptions stored = upgrade ? upgrade(*record) : record->options;
+  const std::string diff = run_options_difference(stored, options, may_change);
   if (!diff.empty()) {
-    throw std::invalid_argument("--resume must continue the same run: " + diff + " (" + stored_path +
+    throw std::invalid_argument("--resume must continue the same run: " + diff + " (" + record->path +
                                 "); start a new run in another folder to change it");
   }
+}
+
+std::optional<RunRecord> read_run_record(const std::string& out) {
+  RunRecord record;
+  record.path = (fs::path(out) / kRunConfigFile).string();
+  if (!fs::exists(record.path)) {
+    const std::string legacy = (fs::path(out) / kLegacyRunConfigFile).string();
+    if (!fs::exists(legacy)) return std::nullopt;
+    record.path = legacy;
+    record.version = 1;
+    record.options = RunOptions::object();
+    for (const auto& entry : read_run_config(legacy)) record.options[entry.first] = entry.second;
+    return record;
+  }
+  checked_file_size(record.path, kMaxTextFileBytes, "run configuration");
+  std::ifstream in(record.path);
+  if (!in) throw std::runtime_error("cannot open run configuration '" + record.path + "'");
+  try {
+    const nlohmann::json doc = nlohmann::json::parse(in);
+    if (doc.value("format", "") != kRunRecordFormat) throw std::runtime_error("not a \"" + std::string(kRunRecordFormat) + "\" record");
+    record.version = doc.at("version").get<int>();
+    record.options = doc.at("options");
+    if (!record.options.is_object()) throw std::runtime_error("\"options\" is not an object");
+  } catch (const nlohmann::json::exception& e) {
+    throw std::runtime_error("run configuration '" + record.path + "' cannot be read: " + e.what());
+  } catch (const std::runtime_error& e) {
+    throw std::runtime_error("run configuration '" + record.path + "': " + e.what());
+  }
+  if (record.version > kRunRecordVersion) {
+    throw std::runtime_error("run configuration '" + record.path + "' has version " + std::to_string(record.version) +
+                             ", newer than this umvs reads (" + std::to_string(kRunRecordVersion) +
+                             "): use the umvs that made the run");
+  }
+  return record;
+}
+
+void write_run_record(const std::string& out, const RunOptions& options) {
+  nlohmann::ordered_json doc;  // format and version first, for people reading the file
+  doc["format"] = kRunRecordFormat;
+  doc["version"] = kRunRecordVersion;
+  doc["options"] = options.is_null() ? RunOptions::object() : options;
+  write_file_atomically((fs::path(out) / kRunConfigFile).string(), [&](std::ostream& os) { os << doc.dump(2) << "\n"; });
 }
 
 RunConfig read_run_config(const std::string& path) {
@@ -94,18 +163,6 @@ RunConfig read_run_config(const std::string& path) {
     config[line.substr(0, eq)] = line.substr(eq + 1);
   }
   return config;
-}
-
-void write_run_config(const std::string& path, const RunConfig& config) {
-  for (const auto& entry : config) {
-    if (entry.first.find_first_of("=\n\r") != std::string::npos || entry.second.find_first_of("\n\r") != std::string::npos) {
-      throw std::invalid_argument("option --" + entry.first + " contains a line break or '=' where it cannot be stored");
-    }
-  }
-  write_file_atomically(path, [&](std::ostream& os) {
-    os << "# the options of this umvs train run: umvs train --resume refuses to change them (docs/training.md)\n";
-    for (const auto& entry : config) os << entry.first << "=" << entry.second << "\n";
-  });
 }
 
 void remove_run_files(const std::string& out) {

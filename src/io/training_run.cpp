@@ -24,26 +24,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-constexpr const char* kRoundStartFile = "round_start.pt";
-constexpr const char* kAnchorFile = "anchor.pt";
-
-// The labelled share of a self-training run: the model's own labels on --data, then the rendered
-// scenes of --supervised-data (exact depth), one index range after the other.
-class LabelledTuples : public TupleSource {
- public:
-  LabelledTuples(const TupleSource& pseudo, std::unique_ptr<TupleSource> rendered)
-      : pseudo_(pseudo), rendered_(std::move(rendered)) {}
-  size_t size() const override { return pseudo_.size() + rendered_->size(); }
-  TrainingTuple tuple(size_t index, std::mt19937_64* rng) const override {
-    return index < pseudo_.size() ? pseudo_.tuple(index, rng) : rendered_->tuple(index - pseudo_.size(), rng);
-  }
-  std::string description() const override { return pseudo_.description() + " and " + rendered_->description(); }
-
- private:
-  const TupleSource& pseudo_;
-  std::unique_ptr<TupleSource> rendered_;
-};
-
 TrainLogRow log_row(int64_t step, const LossValues& loss, double lr, double seconds) {
   TrainLogRow row;
   row.step = step;
@@ -162,7 +142,8 @@ TrainingRun::TrainingRun(TrainingRunConfig config, const std::function<TrainingD
   if (writes_files()) {
     try {
       std::string warnings;
-      check_run_folder(config_.out, config_.start, config_.options, config_.may_change_on_resume, &warnings);
+      check_run_folder(config_.out, config_.start, config_.options, config_.may_change_on_resume,
+                       config_.upgrade_record, &warnings);
       messages_ << warnings;
     } catch (const std::exception& e) {
       if (!group_) throw;
@@ -177,16 +158,7 @@ TrainingRun::TrainingRun(TrainingRunConfig config, const std::function<TrainingD
   if (!data_.train) throw std::invalid_argument("a training run needs training data");
 
   const TupleSource& source = *data_.train;
-  // Self-training: the training tuples labelled by the model (refreshed every round), mixed with
-  // the photometric tuples like supervised data.
-  if (config_.self_training_every > 0) {
-    to_label_ = fixed_tuples(source, config_.pseudo_label_tuples);
-    pseudo_ = std::make_unique<TupleList>(to_label_, "pseudo-labelled training tuples");
-    if (data_.supervised) {
-      data_.supervised = std::make_unique<LabelledTuples>(*pseudo_, std::move(data_.supervised));
-      messages_ << "self-training labels drawn with: " << data_.supervised->description() << "\n";
-    }
-  }
+  if (config_.self_training_every > 0) prepare_self_training();
   if (data_.held_out) {
     val_tuples_ = fixed_tuples(*data_.held_out, config_.val_tuples);
     messages_ << "validation: " << data_.held_out->description() << ", using " << val_tuples_.size() << "\n";
@@ -354,50 +326,6 @@ std::vector<TrainingTuple> TrainingRun::next_tuples() {
   return tuples;
 }
 
-void TrainingRun::label_round(MvsNet& labeller) {
-  ConsistencyScore score;
-  auto labelled = pseudo_labelled_tuples(labeller, to_label_, config_.trainer.num_depth, config_.label_rule,
-                                         config_.device, &score, anchor_depth_.empty() ? nullptr : &anchor_depth_,
-                                         config_.trainer.sources);
-  int64_t labels = 0;
-  for (const auto& t : labelled) labels += t.depth_gt.gt(0).sum().item<int64_t>();
-  pseudo_->replace(std::move(labelled));
-  messages_ << "\nself-training round at step " << step_ << ": " << 100.0 * score.confirmed_fraction
-            << "% of the reference pixels of " << score.tuples << " tuples confirmed by other views";
-  // Where few pixels are confirmed (far-apart keyframes), an anchored run barely moves the model:
-  // say so, so that a user knows why and what the other choice is.
-  if (!anchor_depth_.empty() && score.pixels > 0) {
-    const double anchored = static_cast<double>(labels) / static_cast<double>(score.pixels) - score.confirmed_fraction;
-    messages_ << "; " << 100.0 * anchored
-              << "% keep the start model's depth (anchored; --anchor-unconfirmed 0 leaves them to the photometric loss)";
-  }
-  messages_ << "\n";
-}
-
-void TrainingRun::prepare_anchor() {
-  const std::string path = config_.out + "/" + kAnchorFile;
-  MvsNet anchor{nullptr};
-  if (step_ == 0) {
-    anchor = trainer_->model();
-    CheckpointMeta m;
-    if (writes_files()) save_checkpoint(path, anchor, m);
-  } else {  // resumed: the model of step 0, as the run kept it
-    if (!fs::exists(path)) throw std::runtime_error("--resume: " + path + " (anchored self-training) is missing");
-    anchor = load_model(path, config_.device).model;
-  }
-  anchor_depth_ = reference_depths(anchor, to_label_, config_.trainer.num_depth, config_.device,
-                                   config_.anchor_min_confidence, config_.anchor_unseen, config_.trainer.sources);
-  messages_ << "anchored self-training: the pixels no view confirms keep the depth of step 0";
-  if (config_.anchor_min_confidence > 0.0) {
-    int64_t kept = 0, all = 0;
-    for (const auto& d : anchor_depth_) kept += d.gt(0).sum().item<int64_t>(), all += d.numel();
-    messages_ << " where its confidence is at least " << config_.anchor_min_confidence
-              << (config_.anchor_unseen ? " or no loss view sees them" : "") << " ("
-              << 100.0 * static_cast<double>(kept) / static_cast<double>(std::max<int64_t>(all, 1)) << "% of the reference pixels)";
-  }
-  messages_ << "\n";
-}
-
 void TrainingRun::write_curve() const {
   CurveSeries raw{{}, {}, 190, 190, 235}, smooth{{}, {}, 20, 60, 200}, val{{}, {}, 220, 40, 30};
   double ema = 0;
@@ -428,7 +356,7 @@ TrainingRun::Result TrainingRun::run(
     make_directories(out);
     if (config_.start == RunStart::kOverwrite) remove_run_files(out);
     remove_stale_temp_files(out);  // what a killed run was writing (its last complete files stay)
-    write_run_config(out + "/" + kRunConfigFile, config_.options);
+    write_run_record(out, config_.options);
     // The log holds exactly the rows up to the starting step.
     write_file_atomically(log_path(), [&](std::ostream& os) {
       os << csv_header(train_log_columns()) << "\n";
@@ -451,27 +379,9 @@ TrainingRun::Result TrainingRun::run(
   const int64_t first = step_, to_do = config_.steps - step_;
   const double max_seconds = 60.0 * config_.max_minutes;
   const auto started = std::chrono::steady_clock::now();
-  const int every = config_.self_training_every;
-  // A self-training round starts at every multiple of `every`: its labels come from the model at
-  // that step (round_start.pt keeps it, so that a resumed run labels exactly alike).
-  const std::string round_path = out + "/" + kRoundStartFile;
-  if (config_.self_training_every > 0 && config_.anchor_unconfirmed) prepare_anchor();
-  if (every > 0 && step_ % every != 0) {  // resumed within a round
-    if (!fs::exists(round_path)) throw std::runtime_error("--resume: " + round_path + " is missing");
-    auto round_model = load_model(round_path, config_.device);
-    if (round_model.meta.step != step_ / every * every) {
-      throw std::runtime_error("--resume: " + round_path + " is from step " + std::to_string(round_model.meta.step) +
-                               ", not from the start of the round of step " + std::to_string(step_));
-    }
-    label_round(round_model.model);
-  }
+  if (config_.self_training_every > 0) start_self_training();
   while (step_ < config_.steps) {
-    if (every > 0 && step_ % every == 0) {
-      label_round(trainer_->model());  // (every rank labels all tuples alike: same model, same labels)
-      CheckpointMeta m;
-      m.step = step_;
-      if (writes_files()) save_checkpoint(round_path, trainer_->model(), m);
-    }
+    if (config_.self_training_every > 0 && step_ % config_.self_training_every == 0) start_round();
     const auto t0 = std::chrono::steady_clock::now();
     const double lr = learning_rate_at(config_.trainer, step_, config_.steps);
     trainer_->set_learning_rate(lr);

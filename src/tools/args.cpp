@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cerrno>
 #include <climits>
+#include <cstdio>
 #include <cstdlib>
 #include <iostream>
 #include <sstream>
@@ -28,6 +29,16 @@ bool is_integer(const std::string& text) {
   errno = 0;
   const long v = std::strtol(text.c_str(), &end, 10);
   return end == text.c_str() + text.size() && errno == 0 && v >= INT_MIN && v <= INT_MAX;
+}
+
+// The shortest text that reads back as `v` (--help shows 0.001, not 0.0010000000000000000208).
+std::string number_text(double v) {
+  char text[32];
+  for (int digits = 6; digits <= 17; ++digits) {
+    std::snprintf(text, sizeof(text), "%.*g", digits, v);
+    if (std::strtod(text, nullptr) == v) break;
+  }
+  return text;
 }
 
 // Levenshtein distance, for "did you mean".
@@ -105,6 +116,66 @@ Args& Args::repeated(const std::string& name, const std::string& help) {
   return *this;
 }
 
+Args& Args::bind(const std::string& name, std::string* field, const std::string& help) {
+  declare(name, *field, help, Kind::kText);
+  write_bound_.push_back([name, field](const Args& a) {
+    if (a.given(name)) *field = a.str(name);
+  });
+  return *this;
+}
+Args& Args::bind(const std::string& name, double* field, const std::string& help) {
+  declare(name, number_text(*field), help, Kind::kNumber);
+  write_bound_.push_back([name, field](const Args& a) {
+    if (a.given(name)) *field = a.real(name);
+  });
+  return *this;
+}
+Args& Args::bind(const std::string& name, int* field, const std::string& help) {
+  option(name, *field, help);
+  write_bound_.push_back([name, field](const Args& a) {
+    if (a.given(name)) *field = a.integer(name);
+  });
+  return *this;
+}
+Args& Args::bind(const std::string& name, bool* field, const std::string& help) {
+  option(name, *field ? 1 : 0, help);
+  write_bound_.push_back([name, field](const Args& a) {
+    if (!a.given(name)) return;
+    const std::string v = a.str(name);
+    if (v != "0" && v != "1") throw std::invalid_argument("--" + name + " must be 0 or 1, got '" + v + "'");
+    *field = v == "1";
+  });
+  return *this;
+}
+Args& Args::bind(const std::string& name, std::optional<int>* field, const std::string& help) {
+  declare(name, field->has_value() ? std::to_string(**field) : "", help, Kind::kInteger);
+  write_bound_.push_back([name, field](const Args& a) {
+    if (a.given(name)) *field = a.integer(name);
+  });
+  return *this;
+}
+Args& Args::bind(const std::string& name, std::vector<std::string>* field, const std::string& help) {
+  std::string joined;
+  for (const auto& item : *field) joined += (joined.empty() ? "" : ",") + item;
+  declare(name, joined, help, Kind::kText);
+  write_bound_.push_back([name, field](const Args& a) {
+    if (a.given(name)) *field = a.all(name);
+  });
+  return *this;
+}
+Args& Args::bind_repeated(const std::string& name, std::vector<std::string>* field, const std::string& help) {
+  bind(name, field, help);
+  app_->get_option("--" + name)->multi_option_policy(CLI::MultiOptionPolicy::TakeAll)->description(help + " (repeatable)");
+  return *this;
+}
+Args& Args::flag(const std::string& name, bool* field, const std::string& help) {
+  flag(name, help);
+  write_bound_.push_back([name, field](const Args& a) {
+    if (a.given(name)) *field = a.on(name);
+  });
+  return *this;
+}
+
 void Args::check_known_options(const std::vector<std::string>& args) const {
   for (const auto& a : args) {
     if (a.size() < 3 || a.compare(0, 2, "--") != 0) continue;
@@ -136,6 +207,7 @@ bool Args::parse(int argc, char** argv) {
   for (const auto& f : flags_) {
     if (app_->get_option("--" + f.first)->count() > 0) values_[f.first] = {f.second ? "1" : "0"};
   }
+  for (const auto& write : write_bound_) write(*this);
   return true;
 }
 
@@ -172,6 +244,14 @@ double Args::real(const std::string& name) const {
 bool Args::given(const std::string& name) const {
   auto v = values_.find(name);
   return v != values_.end() && !v->second.empty();
+}
+
+std::set<std::string> Args::given_names() const {
+  std::set<std::string> names;
+  for (const auto& name : order_) {
+    if (given(name)) names.insert(name);
+  }
+  return names;
 }
 
 bool Args::on(const std::string& name) const {

@@ -21,6 +21,13 @@ struct LocalRanksResult {
 // output is kept (last lines) for error reports. Blocks until all ranks ended.
 LocalRanksResult run_local_ranks(const std::vector<std::string>& argv, int ranks, std::ostream& out);
 
+// `umvs <command> ARGS` (argc, argv: ARGS) again as `ranks` local ranks of this executable
+// (/proc/self/exe), without its --nproc option. Rank 0's output and the launcher's messages go to
+// `log`, "all K ranks finished" to `out`. Returns the exit status: 0, the failing rank's (2: bad
+// usage), or 1 when it was killed.
+int rerun_as_local_ranks(const std::string& command, int argc, char** argv, int ranks, std::ostream& log,
+                         std::ostream& out);
+
 // A TCP port on 127.0.0.1 that was free a moment ago (bound to port 0 and released).
 int free_local_port();
 

@@ -5,44 +5,75 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <map>
 #include <optional>
 #include <string>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
 namespace umvs {
 
-// Option name (without --) -> value as given or defaulted. Stored as OUT/run_config.txt.
-using RunConfig = std::map<std::string, std::string>;
+// The options of a run: option name (without --) -> typed value (number, text, 0/1 option as a
+// bool, list as an array of text), as given or defaulted. Stored in OUT/run_config.json.
+using RunOptions = nlohmann::json;
 
 enum class RunStart {
   kFresh,      // OUT must be missing or empty
-  kResume,     // OUT/last.pt must exist; the options must equal OUT/run_config.txt
+  kResume,     // OUT/last.pt must exist; the options must equal the recorded ones
   kOverwrite,  // OUT may hold an earlier run; its files (run_files()) are replaced
 };
 
 // The files `umvs train` writes into its run folder.
 const std::vector<std::string>& run_files();
-constexpr const char* kRunConfigFile = "run_config.txt";
+
+// The record of a run's options: OUT/run_config.json,
+//   {"format": "umvs train run", "version": 2, "options": {"batch": 1, "data": ["/abs/path"], ...}}.
+// Folders of older versions hold OUT/run_config.txt instead ("name=value" lines): version 1,
+// every value text. The version changes when an option is added that changes what a run
+// computes; upgrade_train_record (io/train_options.h) brings older records to this one.
+constexpr const char* kRunConfigFile = "run_config.json";
+constexpr const char* kLegacyRunConfigFile = "run_config.txt";
+constexpr const char* kRunRecordFormat = "umvs train run";
+constexpr int kRunRecordVersion = 2;
+
+struct RunRecord {
+  std::string path;     // the file it was read from
+  int version = kRunRecordVersion;
+  RunOptions options;   // an object; version 1: every value a string
+};
+// The record in `out`: run_config.json, else run_config.txt; nullopt when it has neither. Throws
+// std::runtime_error naming the file when it is malformed, of another format or of a newer version.
+std::optional<RunRecord> read_run_record(const std::string& out);
+// Writes OUT/run_config.json atomically (version kRunRecordVersion).
+void write_run_record(const std::string& out, const RunOptions& options);
+// The "name=value" lines of a run_config.txt. Throws std::runtime_error naming the file when
+// malformed.
+using RunConfig = std::map<std::string, std::string>;
+RunConfig read_run_config(const std::string& path);
+
+// Brings a record of an older version to the current one (the options it ran with, in today's
+// terms).
+using RunRecordUpgrade = std::function<RunOptions(const RunRecord&)>;
 
 // Checks, without changing anything, that a run may start in `out`. Throws std::invalid_argument
 // naming the problem: OUT is not a folder; kFresh and OUT is not empty (says to give --resume or
-// --overwrite); kResume and OUT/last.pt is missing, or an option differs from OUT/run_config.txt
-// (names every such option and both values). Options in `may_change` (e.g. the step count) are
-// not compared. A run folder without run_config.txt (written before it existed) is accepted for
-// kResume with a warning on `warnings`.
-void check_run_folder(const std::string& out, RunStart start, const RunConfig& config,
-                      const std::vector<std::string>& may_change, std::string* warnings);
+// --overwrite); kResume and OUT/last.pt is missing, or an option differs from the recorded ones
+// (read_run_record, then `upgrade` when given; names every such option and both values). Options
+// in `may_change` (e.g. the step count) are not compared. A run folder without a record (written
+// before there was one) is accepted for kResume with a warning on `warnings`.
+void check_run_folder(const std::string& out, RunStart start, const RunOptions& options,
+                      const std::vector<std::string>& may_change, const RunRecordUpgrade& upgrade,
+                      std::string* warnings);
 
 // Every option whose value differs, in name order, as "--NAME: the run in OUT has A, now B" joined
-// by "; "; "" when none. Options missing on one side count as differing ("(not set)").
-std::string run_config_difference(const RunConfig& stored, const RunConfig& current,
-                                  const std::vector<std::string>& may_change);
-
-// One "name=value" line per option. read throws std::runtime_error naming the file when malformed;
-// write (atomic) throws std::invalid_argument for a value with a line break.
-RunConfig read_run_config(const std::string& path);
-void write_run_config(const std::string& path, const RunConfig& config);
+// by "; "; "" when none. Values are shown as on the command line ('0.5', '1' for true, 'a,b' for a
+// list); options missing on one side count as differing ("(not set)").
+std::string run_options_difference(const RunOptions& stored, const RunOptions& current,
+                                   const std::vector<std::string>& may_change);
+// A value as on the command line: "0.5", "1"/"0" for a bool, "a,b" for a list.
+std::string option_text(const nlohmann::json& value);
 
 // kOverwrite: removes the files of run_files() from `out` (nothing else); throws
 // std::runtime_error naming a file that cannot be removed.

@@ -29,8 +29,9 @@ struct TrainingData {
 struct TrainingRunConfig {
   std::string out;                       // the run folder
   RunStart start = RunStart::kFresh;     // new run, --resume or --overwrite
-  RunConfig options;                     // stored as run_config.txt; a resume must match them
+  RunOptions options = RunOptions::object();  // recorded as run_config.json; a resume must match them
   std::vector<std::string> may_change_on_resume;  // options a resume may change (not compared)
+  RunRecordUpgrade upgrade_record;       // an older version's record in today's terms (none: as recorded)
   std::string init;                      // checkpoint to start from; "" = new model (new_model)
   MvsNetConfig new_model;                // the network of a new model (num_views, sampling, ...)
   std::optional<FeatureWarp> feature_warp;  // set on a new or --init model (none: theirs)
@@ -110,8 +111,13 @@ class TrainingRun {
   void checkpoint(TrainLogRow& row, std::ostream* log = nullptr);
   Evaluation validate();                        // on val_tuples_, shared out over the ranks
   std::vector<TrainingTuple> next_tuples();     // this rank's share of the next step
+  // Self-training (training_run_self_training.cpp).
+  void prepare_self_training();                 // to_label_, pseudo_ (and the rendered labels)
+  void start_self_training();                   // anchors; labels of a round resumed within
+  void start_round();                           // labels by the current model, kept as round_start.pt
   void label_round(MvsNet& labeller);
   void prepare_anchor();                        // anchor_depth_, from anchor.pt (written at step 0)
+  std::string round_path() const;
   void write_curve() const;
   void write_blended();
 

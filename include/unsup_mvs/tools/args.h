@@ -4,8 +4,11 @@
 // the option.
 #pragma once
 
+#include <functional>
 #include <map>
 #include <memory>
+#include <optional>
+#include <set>
 #include <string>
 #include <utility>
 #include <vector>
@@ -37,6 +40,19 @@ class Args {
   // An option that may be given several times (e.g. --bag a.bag --bag b.bag).
   Args& repeated(const std::string& name, const std::string& help);
 
+  // Options bound to a field of a config struct: the field's value is the default (--help shows
+  // it), and parse() writes a given value into the field, so that the struct's initialiser is the
+  // option's only default. An int option takes integers only; a bool option 0 or 1; an optional
+  // int has no default; a list is comma-separated (bind_repeated: also repeatable).
+  Args& bind(const std::string& name, std::string* field, const std::string& help);
+  Args& bind(const std::string& name, double* field, const std::string& help);
+  Args& bind(const std::string& name, int* field, const std::string& help);
+  Args& bind(const std::string& name, bool* field, const std::string& help);
+  Args& bind(const std::string& name, std::optional<int>* field, const std::string& help);
+  Args& bind(const std::string& name, std::vector<std::string>* field, const std::string& help);
+  Args& bind_repeated(const std::string& name, std::vector<std::string>* field, const std::string& help);
+  Args& flag(const std::string& name, bool* field, const std::string& help);
+
   // Returns false when --help was given (usage already printed). Throws std::invalid_argument
   // with a message naming the offending option otherwise; an unknown option is reported first
   // (with the declared one it most resembles), before any missing one.
@@ -46,6 +62,7 @@ class Args {
   int integer(const std::string& name) const;
   double real(const std::string& name) const;
   bool given(const std::string& name) const;
+  std::set<std::string> given_names() const;  // the options on the command line
   bool on(const std::string& name) const;  // for flags
   std::vector<std::string> all(const std::string& name) const;  // repeated or comma-separated
   std::vector<int> integers(const std::string& name) const;     // comma-separated ints
@@ -63,6 +80,8 @@ class Args {
   // CLI11 writes into these (std::map keeps their addresses while options are added).
   std::map<std::string, std::vector<std::string>> values_;
   std::map<std::string, bool> flags_;
+  // After parsing: given values into the bound fields (handed the Args, which may have moved).
+  std::vector<std::function<void(const Args&)>> write_bound_;
 };
 
 // --help of a program or command whose first argument picks what runs (umvs <command>,
