@@ -88,7 +88,8 @@ sleep 8  # the last keyframe sets through inference and fusion
 say "bag done; the keyframe still waiting for a newer one goes out too (keyframe_selector/flush)"
 python3 scripts/flush_replay.py /unsup_mvs 120
 # Every set the selector sent, processed or dropped, and how long each took (the inference nodelet's ~stats).
-stats=$(rosservice call /unsup_mvs/inference/stats | sed -n 's/^message: *//p' | tr -d '"')
+stats=$(python3 -c "import rospy; from std_srvs.srv import Trigger
+print(rospy.ServiceProxy('/unsup_mvs/inference/stats', Trigger)().message)" 2>/dev/null || true)
 say "saving the fused cloud"
 rosservice call /unsup_mvs/fusion/save_cloud "path: '$WORK/cloud.ply'"
 # The nodes' last words (rosout.log: "stamp LEVEL node [file] [topics: ...] message").

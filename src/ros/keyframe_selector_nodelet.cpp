@@ -201,7 +201,7 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
     const std::string& camera_frame = image->header.frame_id;
     geometry_msgs::TransformStamped tf;
     try {
-      tf = tf_buffer_->lookupTransform(world_frame_, camera_frame, image->header.stamp, ros::Duration(tf_timeout_));
+      tf = lookupCameraTransform(camera_frame, image->header.stamp);
     } catch (const tf2::TransformException& e) {
       NODELET_WARN_THROTTLE(2.0, "keyframe_selector: no transform %s -> '%s' at %.3f: %s; frame skipped",
                             world_frame_.c_str(), camera_frame.c_str(), image->header.stamp.toSec(), e.what());
@@ -245,6 +245,17 @@ class KeyframeSelectorNodelet : public nodelet::Nodelet {
 
   // The end of a log (no frame comes any more to release the newest keyframe): the keyframes
   // still waiting for their lookahead go out with the neighbours they have.
+  // The camera's pose at `stamp`, waiting at most ~tf_timeout seconds of wall time for it: tf2's own
+  // timeout counts ROS time, which stops with a replayed log, and the callback would then wait for
+  // ever (and with it the flush service). Throws tf2::TransformException when it does not come.
+  geometry_msgs::TransformStamped lookupCameraTransform(const std::string& camera_frame, const ros::Time& stamp) {
+    const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(tf_timeout_);
+    while (!tf_buffer_->canTransform(world_frame_, camera_frame, stamp) && ros::WallTime::now() < deadline && ros::ok()) {
+      ros::WallDuration(0.002).sleep();
+    }
+    return tf_buffer_->lookupTransform(world_frame_, camera_frame, stamp);
+  }
+
   bool onFlush(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
     std::lock_guard<std::mutex> lock(mutex_);
     const umvs::DepthRange range = depth_range_->range();
