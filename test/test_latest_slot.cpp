@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "unsup_mvs/core/latest_slot.h"
+#include "unsup_mvs/core/timing_log.h"
 
 namespace umvs {
 namespace {
@@ -166,5 +167,16 @@ TEST(LatestSlot, EveryItemIsReceivedOrCountedDroppedUnderContention) {
   EXPECT_FALSE(slot.waiting());
 }
 
+
+TEST(TimingLog, PercentilesCoverTheLatestWindowAndTheCountEveryItem) {
+  TimingLog log(10);
+  EXPECT_EQ(log.summary("a", "b"), "none yet");
+  for (int i = 1; i <= 25; ++i) log.add(i, 100 + i);  // the window keeps 16 ... 25
+  EXPECT_EQ(log.count(), 25u);
+  // Nearest rank over 10 values: p50 is the 5th (20), p90 the 9th (24).
+  EXPECT_EQ(log.summary("a", "b"), "a p50 20.00 s, p90 24.00 s; b p50 120.00 s, p90 124.00 s");
+  EXPECT_DOUBLE_EQ(percentile({3, 1, 2}, 50), 2.0);
+  EXPECT_DOUBLE_EQ(percentile({}, 90), 0.0);
+}
 }  // namespace
 }  // namespace umvs

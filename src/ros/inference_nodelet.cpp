@@ -275,7 +275,7 @@ class InferenceNodelet : public nodelet::Nodelet {
     NODELET_INFO_THROTTLE(2.0, "inference: keyframe %u: %dx%d depth map in %.2f s (network %.2f s%s), %.2f s after the "
                           "image; %ld done, %ld stale sets dropped, %ld failed",
                           set.reference_id, map.camera.width, map.camera.height, total, map.seconds,
-                          map.per_source_passes ? ", each source also alone" : "", latency, static_cast<long>(timings_.size()),
+                          map.per_source_passes ? ", each source also alone" : "", latency, static_cast<long>(timings_.count()),
                           static_cast<long>(pending_->dropped()), failed_.load());
     for (size_t s = 0; s < map.source_turns.size(); ++s) {
       const umvs::SourceTurn& turn = map.source_turns[s];
@@ -323,7 +323,7 @@ class InferenceNodelet : public nodelet::Nodelet {
   }
 
   std::string statsLine() const {
-    return std::to_string(timings_.size()) + " keyframe sets processed, " + std::to_string(pending_->dropped()) +
+    return std::to_string(timings_.count()) + " keyframe sets processed, " + std::to_string(pending_->dropped()) +
            " dropped (stale), " + std::to_string(failed_.load()) + " failed; " +
            timings_.summary("image to depth map", "after the image's stamp");
   }
@@ -343,7 +343,7 @@ class InferenceNodelet : public nodelet::Nodelet {
       p.value = v;
       status.values.push_back(p);
     };
-    kv("processed", std::to_string(timings_.size()));
+    kv("processed", std::to_string(timings_.count()));
     kv("dropped_stale", std::to_string(pending_->dropped()));
     kv("failed", std::to_string(failed_.load()));
     kv("last_total_s", std::to_string(total));
@@ -479,7 +479,7 @@ class InferenceNodelet : public nodelet::Nodelet {
   std::unique_ptr<umvs::LatestSlot<unsup_mvs::KeyframeSetConstPtr>> pending_;
   std::thread worker_;
   std::atomic<long> failed_{0};
-  umvs::TimingLog timings_;  // per processed set: image to depth map, and since the image's stamp
+  umvs::TimingLog timings_;  // per processed set (the latest 1000): image to depth map, and since the image's stamp
   ros::ServiceServer stats_srv_;
 
   std::mutex connect_mutex_;

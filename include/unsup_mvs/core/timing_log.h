@@ -20,19 +20,27 @@ inline double percentile(std::vector<double> values, double p) {
 }
 
 // Seconds of each processed item, two clocks per item (e.g. processing, and since the input was
-// stamped); safe to add from one thread and read from another.
+// stamped), over the latest `window` items: a node that runs for days keeps bounded memory and
+// sorts at most `window` values per summary. Safe to add from one thread and read from another.
 class TimingLog {
  public:
+  explicit TimingLog(size_t window = 1000) : window_(std::max<size_t>(1, window)) {}
   void add(double processing_s, double since_stamp_s) {
     std::lock_guard<std::mutex> lock(mutex_);
+    if (processing_.size() == window_) {  // the oldest leaves
+      processing_.erase(processing_.begin());
+      since_stamp_.erase(since_stamp_.begin());
+    }
     processing_.push_back(processing_s);
     since_stamp_.push_back(since_stamp_s);
+    ++count_;
   }
-  size_t size() const {
+  // Items added so far, all of them (not only the window's).
+  size_t count() const {
     std::lock_guard<std::mutex> lock(mutex_);
-    return processing_.size();
+    return count_;
   }
-  // "<what> p50 0.41 s, p90 0.47 s; <since> p50 0.9 s, p90 1.2 s" (no items: "none yet").
+  // "<what> p50 0.41 s, p90 0.47 s; <since> p50 0.9 s, p90 1.2 s" over the window (no items: "none yet").
   std::string summary(const std::string& what, const std::string& since) const {
     std::lock_guard<std::mutex> lock(mutex_);
     if (processing_.empty()) return "none yet";
@@ -45,6 +53,8 @@ class TimingLog {
 
  private:
   mutable std::mutex mutex_;
+  size_t window_;
+  size_t count_ = 0;
   std::vector<double> processing_, since_stamp_;
 };
 
