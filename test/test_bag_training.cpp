@@ -21,6 +21,7 @@
 #include "unsup_mvs/io/ros/bag_io.h"
 #include "unsup_mvs/io/ros/bag_training_data.h"
 #include "unsup_mvs/io/ros/ros_conversions.h"
+#include "unsup_mvs/jobs/fine_tune_job.h"  // keyframe_stream_train_args
 
 namespace {
 

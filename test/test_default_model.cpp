@@ -16,7 +16,7 @@
 #include "unsup_mvs/core/training.h"
 #include "unsup_mvs/io/checkpoint.h"
 #include "unsup_mvs/io/training_data.h"
-#include "unsup_mvs/io/training_run.h"
+#include "unsup_mvs/jobs/training_run.h"
 
 namespace umvs {
 namespace {

@@ -1,4 +1,4 @@
-// Data-parallel training (core/distributed.h, io/training_run.h, io/local_ranks.h): two ranks over
+// Data-parallel training (core/distributed.h, jobs/training_run.h, io/local_ranks.h): two ranks over
 // loopback with Gloo.
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -20,7 +20,7 @@
 #include "unsup_mvs/io/child_process.h"
 #include "unsup_mvs/io/local_ranks.h"
 #include "unsup_mvs/io/synth_writer.h"
-#include "unsup_mvs/io/training_run.h"
+#include "unsup_mvs/jobs/training_run.h"
 
 namespace umvs {
 namespace {

@@ -1,4 +1,4 @@
-// FineTuneJob (io/fine_tune_job.h), the trainer node's job logic, driven with a fake `umvs`: a shell
+// FineTuneJob (jobs/fine_tune_job.h), the trainer node's job logic, driven with a fake `umvs`: a shell
 // script that copies the train_log.csv / eval.csv the test prepared into the job's folders, writes
 // best.pt and exits with the status the test asks for. Conditions are awaited by polling the job
 // with a deadline.
@@ -17,8 +17,8 @@
 
 #include "cli_test_util.h"
 #include "test_util.h"
-#include "unsup_mvs/io/fine_tune_job.h"
 #include "unsup_mvs/io/run_folder.h"
+#include "unsup_mvs/jobs/fine_tune_job.h"
 
 namespace umvs {
 namespace {

@@ -1,4 +1,4 @@
-// `umvs train` and its run (io/training_run.h) on synthetic scenes with exact depth written as
+// `umvs train` and its run (jobs/training_run.h) on synthetic scenes with exact depth written as
 // MVSNet folders: resuming bit for bit, --eval-only --against (the trainer node's verdict),
 // --max-minutes, and the run's log.
 #include <gmock/gmock.h>
@@ -18,11 +18,11 @@
 #include "training_test_fixtures.h"
 #include "unsup_mvs/core/training.h"
 #include "unsup_mvs/io/checkpoint.h"
-#include "unsup_mvs/io/fine_tune_job.h"
 #include "unsup_mvs/io/image_io.h"
 #include "unsup_mvs/io/run_folder.h"
 #include "unsup_mvs/io/training_data.h"
-#include "unsup_mvs/io/training_run.h"
+#include "unsup_mvs/jobs/fine_tune_job.h"
+#include "unsup_mvs/jobs/training_run.h"
 
 namespace umvs {
 namespace {

@@ -1,4 +1,4 @@
-// The record of a `umvs train` run (io/train_options.h, io/run_folder.h): OUT/run_config.json with
+// The record of a `umvs train` run (jobs/train_options.h, io/run_folder.h): OUT/run_config.json with
 // typed, versioned options; folders of the previous version (run_config.txt) still resume,
 // upgraded; and the options bound to TrainOptions keep CLI11's checks and --help defaults.
 #include <gtest/gtest.h>
@@ -14,7 +14,7 @@
 #include "test_util.h"
 #include "unsup_mvs/io/checkpoint.h"
 #include "unsup_mvs/io/run_folder.h"
-#include "unsup_mvs/io/train_options.h"
+#include "unsup_mvs/jobs/train_options.h"
 
 namespace umvs {
 namespace {

@@ -1,6 +1,6 @@
 // Training pieces (core/training.h, io/training_data.h) on synthetic scenes with exact depth
 // (core/synth.h) written as MVSNet folders: tuples, trainer steps, the volume terms, the learning
-// rate schedule and the loss curve. `umvs train` and io/training_run.h: test_train_command.cpp.
+// rate schedule and the loss curve. `umvs train` and jobs/training_run.h: test_train_command.cpp.
 #include <gtest/gtest.h>
 #include <torch/torch.h>
 

@@ -14,9 +14,9 @@
 #include "unsup_mvs/core/metrics.h"
 #include "unsup_mvs/io/array_io.h"
 #include "unsup_mvs/io/cloud_file.h"
-#include "unsup_mvs/io/fine_tune_job.h"
 #include "unsup_mvs/io/inference_folder.h"
 #include "unsup_mvs/io/mvs_folder.h"
+#include "unsup_mvs/jobs/fine_tune_job.h"
 #include "unsup_mvs/tools/args.h"
 #include "unsup_mvs/tools/command.h"
 
@@ -419,7 +419,7 @@ int eval_cloud(int argc, char** argv) {
   return 0;
 }
 
-// The trainer node's reload rule (io/fine_tune_job.h, decide_reload) on two `umvs train --eval-only`
+// The trainer node's reload rule (jobs/fine_tune_job.h, decide_reload) on two `umvs train --eval-only`
 // results, for scripts that tabulate its verdicts.
 int eval_rule(int argc, char** argv) {
   umvs::Args args("eval rule",

@@ -1,6 +1,6 @@
 // umvs train: unsupervised training / fine-tuning of MVSNet with the robust photometric loss. The
-// options are bound to the fields of TrainOptions (io/train_options.h), which checks them and turns
-// them into the run; io/training_run runs it.
+// options are bound to the fields of TrainOptions (jobs/train_options.h), which checks them and turns
+// them into the run; jobs/training_run runs it.
 #include <torch/torch.h>
 
 #include <algorithm>
@@ -13,8 +13,8 @@
 
 #include "unsup_mvs/core/device.h"
 #include "unsup_mvs/io/local_ranks.h"
-#include "unsup_mvs/io/train_options.h"
-#include "unsup_mvs/io/training_run.h"
+#include "unsup_mvs/jobs/train_options.h"
+#include "unsup_mvs/jobs/training_run.h"
 #include "unsup_mvs/tools/args.h"
 #include "unsup_mvs/tools/command.h"
 #include "unsup_mvs/tools/progress.h"

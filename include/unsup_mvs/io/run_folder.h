@@ -32,7 +32,7 @@ const std::vector<std::string>& run_files();
 //   {"format": "umvs train run", "version": 2, "options": {"batch": 1, "data": ["/abs/path"], ...}}.
 // Folders of older versions hold OUT/run_config.txt instead ("name=value" lines): version 1,
 // every value text. The version changes when an option is added that changes what a run
-// computes; upgrade_train_record (io/train_options.h) brings older records to this one.
+// computes; upgrade_train_record (jobs/train_options.h) brings older records to this one.
 constexpr const char* kRunConfigFile = "run_config.json";
 constexpr const char* kLegacyRunConfigFile = "run_config.txt";
 constexpr const char* kRunRecordFormat = "umvs train run";

@@ -12,8 +12,8 @@
 #include "unsup_mvs/core/keyframes.h"
 #include "unsup_mvs/core/recommended_estimator.h"
 #include "unsup_mvs/io/cloud_filter.h"
-#include "unsup_mvs/io/fine_tune_job.h"
 #include "unsup_mvs/io/occupancy_map.h"
+#include "unsup_mvs/jobs/fine_tune_job.h"
 
 namespace umvs_ros {
 

@@ -1,6 +1,6 @@
 // The trainer node: fine-tunes the network on recorded bags without ground truth, on request.
 //
-// The job itself lives in umvs::FineTuneJob (io/fine_tune_job.h, ROS-free and unit-tested in
+// The job itself lives in umvs::FineTuneJob (jobs/fine_tune_job.h, ROS-free and unit-tested in
 // test/test_fine_tune_job.cpp): it checks a request (bags exist and are readable, output inside
 // ~output_dir and not an existing name, one job at a time), runs `umvs train --bag ...` as a child
 // process (an argument list, never a shell), reads step, loss terms and ETA from the job's
@@ -22,7 +22,7 @@
 #include <string>
 
 #include "unsup_mvs/FineTune.h"
-#include "unsup_mvs/io/fine_tune_job.h"
+#include "unsup_mvs/jobs/fine_tune_job.h"
 
 namespace umvs_ros {
 

@@ -15,7 +15,6 @@
 #include <vector>
 
 #include "unsup_mvs/core/keyframes.h"
-#include "unsup_mvs/io/fine_tune_job.h"  // keyframe_stream_train_args (the options that read a bag as BagDataConfig)
 #include "unsup_mvs/io/ros/bag_io.h"
 #include "unsup_mvs/io/training_data.h"
 

@@ -1,6 +1,6 @@
-// TrainOptions (io/train_options.h): the checks of `umvs train`'s options, and the configurations
+// TrainOptions (jobs/train_options.h): the checks of `umvs train`'s options, and the configurations
 // they turn into.
-#include "unsup_mvs/io/train_options.h"
+#include "unsup_mvs/jobs/train_options.h"
 
 #include <ostream>
 #include <stdexcept>

@@ -1,5 +1,5 @@
 // The options of `umvs train` as one typed struct, their checks, and what they turn into: the
-// TrainerConfig, TupleConfig and TrainingRunConfig of io/training_run.h, the data, and the record
+// TrainerConfig, TupleConfig and TrainingRunConfig of jobs/training_run.h, the data, and the record
 // of the run (OUT/run_config.json) that a --resume is compared with. src/tools/cmd_train.cpp only
 // declares the options (bound to these fields: each field's initialiser is the option's default)
 // and calls these functions.
@@ -17,7 +17,7 @@
 #include "unsup_mvs/io/plane_count.h"
 #include "unsup_mvs/io/run_folder.h"
 #include "unsup_mvs/io/training_data.h"
-#include "unsup_mvs/io/training_run.h"
+#include "unsup_mvs/jobs/training_run.h"
 
 namespace umvs {
 

@@ -1,12 +1,12 @@
-// The data of a `umvs train` run and its --eval-only scoring (io/train_options.h).
+// The data of a `umvs train` run and its --eval-only scoring (jobs/train_options.h).
 #include <ostream>
 #include <stdexcept>
 #include <vector>
 
 #include "unsup_mvs/io/atomic_file.h"
 #include "unsup_mvs/io/checkpoint.h"
-#include "unsup_mvs/io/fine_tune_job.h"
-#include "unsup_mvs/io/train_options.h"
+#include "unsup_mvs/jobs/fine_tune_job.h"
+#include "unsup_mvs/jobs/train_options.h"
 #ifdef UMVS_HAVE_ROS
 #include "unsup_mvs/io/ros/bag_training_data.h"
 #endif

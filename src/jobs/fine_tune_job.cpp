@@ -1,4 +1,4 @@
-#include "unsup_mvs/io/fine_tune_job.h"
+#include "unsup_mvs/jobs/fine_tune_job.h"
 
 #include <unistd.h>
 

@@ -1,4 +1,4 @@
-#include "unsup_mvs/io/training_run.h"
+#include "unsup_mvs/jobs/training_run.h"
 
 #include <algorithm>
 #include <exception>

@@ -1,4 +1,4 @@
-// The record of a `umvs train` run (OUT/run_config.json, io/train_options.h): the options as typed
+// The record of a `umvs train` run (OUT/run_config.json, jobs/train_options.h): the options as typed
 // values, and the records of older versions brought to this one, so that their runs still resume.
 #include <algorithm>
 #include <cerrno>
@@ -8,7 +8,7 @@
 #include <stdexcept>
 #include <string>
 
-#include "unsup_mvs/io/train_options.h"
+#include "unsup_mvs/jobs/train_options.h"
 
 namespace umvs {
 

@@ -1,4 +1,4 @@
-// TrainingRun's self-training (io/training_run.h): the labelled tuples, the rounds that label
+// TrainingRun's self-training (jobs/training_run.h): the labelled tuples, the rounds that label
 // them with the model of the round's start (round_start.pt) and the anchors of anchored
 // self-training (anchor.pt, the model of step 0).
 #include <algorithm>
@@ -8,7 +8,7 @@
 #include <string>
 
 #include "unsup_mvs/io/checkpoint.h"
-#include "unsup_mvs/io/training_run.h"
+#include "unsup_mvs/jobs/training_run.h"
 
 namespace umvs {
 
