@@ -107,6 +107,11 @@ void DepthEstimatorConfig::validate() const {
     throw std::invalid_argument("min_parallax_px must be >= 0 pixels (0 = off), got " + std::to_string(min_parallax_px));
   }
   completion.validate();
+  fine.validate();
+}
+
+int first_pass_size(const DepthEstimatorConfig& config, int network_side) {
+  return config.fine.enabled() ? network_side / config.fine.first_pass_downscale : network_side;
 }
 
 torch::Tensor parallax_shift_px(const torch::Tensor& depth, const Camera& depth_camera, const std::vector<Camera>& sources,
@@ -238,13 +243,18 @@ DepthMap DepthEstimator::estimate(const std::vector<ViewInput>& views, double de
   const auto& ref = views.front();
   std::vector<torch::Tensor> images;
   std::vector<Camera> cameras;
-  const NetworkResize plan = plan_network_resize(ref.camera.width, ref.camera.height, config_.max_width, config_.max_height);
+  // A first pass at half size needs the half-size input to be a multiple of 32 as well.
+  const int multiple = config_.fine.enabled() && config_.fine.first_pass_downscale == 2 ? 64 : 32;
+  const NetworkResize plan =
+      plan_network_resize(ref.camera.width, ref.camera.height, config_.max_width, config_.max_height, multiple);
   validate_views(views);
   for (const auto& v : views) {
     images.push_back(apply_network_resize(rgb8_to_float(v.image), plan));
     cameras.push_back(apply_network_resize(v.camera, plan));
   }
   const int D = num_depth();
+  // The map's resolution: the fine pass's, else the network's 1/4.
+  const int divisor = config_.fine.enabled() ? config_.fine.resolution_divisor : 4;
   auto depth_values = depth_hypotheses(depth_min, depth_max, D, network_.model()->config().depth_sampling);
 
   const auto t0 = std::chrono::steady_clock::now();
@@ -262,7 +272,12 @@ DepthMap DepthEstimator::estimate(const std::vector<ViewInput>& views, double de
     auto batch = torch::stack(images).unsqueeze(0).to(device_);
     auto proj = mvsnet_projection_matrices(cameras).unsqueeze(0).to(device_);
     const auto planes = depth_values.unsqueeze(0).to(device_);
-    out = network_.forward(batch, proj, planes, false, &map.stages);
+    const auto proj_fine = mvsnet_projection_matrices(cameras, 1.0 / divisor).unsqueeze(0).to(device_);
+    const auto run = [&](const torch::Tensor& views, const torch::Tensor& p, const torch::Tensor& p_fine, MvsStageTimes* t) {
+      return config_.fine.enabled() ? network_.forward_coarse_to_fine(views, p, planes, config_.fine, p_fine, t)
+                                    : network_.forward(views, p, planes, false, t);
+    };
+    out = run(batch, proj, proj_fine, &map.stages);
     const int64_t num_views = batch.size(1);
     const auto unsure_map = [&] {
       return (out.confidence >= kAutoConfidentLevel).to(torch::kFloat32).mean().item<double>() < kAutoMinConfidentShare;
@@ -273,7 +288,8 @@ DepthMap DepthEstimator::estimate(const std::vector<ViewInput>& views, double de
     if (map.per_source_passes) {
       for (int64_t s = 1; s < num_views; ++s) {
         const auto pair = torch::tensor({int64_t{0}, s}, torch::TensorOptions().dtype(torch::kLong).device(device_));
-        const MvsOutput alone = network_.forward(batch.index_select(1, pair), proj.index_select(1, pair), planes, false);
+        const MvsOutput alone =
+            run(batch.index_select(1, pair), proj.index_select(1, pair), proj_fine.index_select(1, pair), nullptr);
         const auto better = alone.confidence > out.confidence;
         out.depth = torch::where(better, alone.depth, out.depth);
         out.confidence = torch::where(better, alone.confidence, out.confidence);
@@ -285,20 +301,20 @@ DepthMap DepthEstimator::estimate(const std::vector<ViewInput>& views, double de
   map.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   if (config_.min_parallax_px > 0) {
     const std::vector<Camera> sources(cameras.begin() + 1, cameras.end());
-    const auto shift = parallax_shift_px(map.depth, depth_map_camera(cameras.front()), sources);
+    const auto shift = parallax_shift_px(map.depth, depth_map_camera(cameras.front(), 1.0 / divisor), sources);
     map.unresolvable = shift < config_.min_parallax_px;
     map.confidence = map.confidence.masked_fill(map.unresolvable, 0.0f);
   }
   if (config_.completion.enabled()) {
     const auto t1 = std::chrono::steady_clock::now();
-    // The guide is the reference's grey level averaged over each depth pixel's 4x4 input pixels.
-    const auto guide = torch::avg_pool2d(images.front().unsqueeze(0), 4).squeeze(0).mean(0);
+    // The guide is the reference's grey level averaged over the input pixels of each depth pixel.
+    const auto guide = torch::avg_pool2d(images.front().unsqueeze(0), divisor).squeeze(0).mean(0);
     map.depth = complete_depth(map.depth, map.confidence, guide, config_.completion, &map.completion);
     map.completion_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count();
   }
   map.network_camera = cameras.front();
-  map.camera = depth_map_camera(cameras.front());
-  map.color = float_to_rgb8(images.front().slice(1, 0, plan.height, 4).slice(2, 0, plan.width, 4));
+  map.camera = depth_map_camera(cameras.front(), 1.0 / divisor);
+  map.color = float_to_rgb8(images.front().slice(1, 0, plan.height, divisor).slice(2, 0, plan.width, divisor));
   map.depth_min = depth_min;
   map.depth_max = depth_max;
   return map;

@@ -17,6 +17,7 @@
 #include <type_traits>
 #include <vector>
 
+#include "unsup_mvs/core/fine_pass.h"
 #include "unsup_mvs/core/geometry.h"
 
 namespace umvs {
@@ -245,6 +246,17 @@ struct FastMvsNet::FoldedUNet {
       if (!c0.defined()) c0 = torch::empty({y.size(0), y.size(1), D, y.size(3), y.size(4)}, y.options());
       c0.slice(2, begin, end).copy_(y);
     }
+    return after_conv0(std::move(c0));
+  }
+
+  // The same on a whole volume [B,32,D,h,w] at once (small volumes: the fine pass).
+  torch::Tensor forward(const torch::Tensor& volume) const {
+    return after_conv0(onednn_conv3d(volume.contiguous(), conv[0].weight, conv[0].bias, 1, {1, 1, 1}));
+  }
+
+ private:
+  // conv0's output (before its ReLU)  -> logits [B,D,h,w]
+  torch::Tensor after_conv0(torch::Tensor c0) const {
     c0.relu_();
     auto c2 = conv_relu(conv_relu(c0, conv[1]), conv[2]);
     auto c4 = conv_relu(conv_relu(c2, conv[3]), conv[4]);
@@ -295,6 +307,81 @@ MvsOutput FastMvsNet::forward(const torch::Tensor& images, const torch::Tensor& 
   return out;
 }
 
+MvsOutput FastMvsNet::forward_coarse_to_fine(const torch::Tensor& images, const torch::Tensor& proj,
+                                             const torch::Tensor& depth_values, const FinePassConfig& fine,
+                                             const torch::Tensor& proj_fine, MvsStageTimes* times) {
+  fine.validate();
+  TORCH_CHECK(fine.enabled(), "forward_coarse_to_fine: the fine pass is off");
+  TORCH_CHECK(proj_fine.sizes() == proj.sizes(), "forward_coarse_to_fine: proj_fine must be [B,V,4,4] as proj");
+  torch::NoGradGuard no_grad;
+  MvsNetImpl::check_inputs(images, proj, depth_values);
+  const bool fast = unet_ && accelerates(images.device()) && images.scalar_type() == torch::kFloat32;
+  const FeatureWarp warp = model_->config().feature_warp;
+  MvsStageTimes t;
+  auto t0 = Clock::now();
+  auto features = model_->view_features(images);  // [B,V,32,h,w]
+  // The first pass's views and projections: the input's, or at half its size (the first two rows
+  // of the projection matrices scale with the features).
+  auto coarse_features = features;
+  auto coarse_proj = proj;
+  if (fine.first_pass_downscale == 2) {
+    const int64_t B = images.size(0), V = images.size(1), H = images.size(3), W = images.size(4);
+    const auto half = torch::avg_pool2d(images.reshape({B * V, 3, H, W}), 2).view({B, V, 3, H / 2, W / 2});
+    coarse_features = model_->view_features(half);
+    const auto row_scale = torch::tensor({0.5f, 0.5f, 1.0f, 1.0f}, proj.options()).view({1, 1, 4, 1});
+    coarse_proj = proj * row_scale;
+  }
+  t.features = lap(t0);
+  const auto regularize = [&](const torch::Tensor& volume) {
+    return fast ? unet_->forward(volume) : model_->cost_regularization->forward(volume);
+  };
+  torch::Tensor coarse_prob;
+  if (fast) {
+    const VarianceCostVolume volume(coarse_features, coarse_proj, depth_values, warp);
+    t.cost_volume = lap(t0);
+    double volume_seconds = 0;
+    coarse_prob = torch::softmax(unet_->forward(volume, slab_floats_, &volume_seconds), 1);
+    t.cost_volume += volume_seconds;
+    t.regularization = lap(t0) - volume_seconds;
+  } else {
+    const auto volume = variance_volume_by_warps(coarse_features, coarse_proj, depth_values, warp);
+    t.cost_volume = lap(t0);
+    coarse_prob = torch::softmax(regularize(volume), 1);
+    t.regularization = lap(t0);
+  }
+  MvsOutput out;
+  out.depth_init = expected_depth(coarse_prob, depth_values);
+  auto confidence = photometric_confidence(coarse_prob);
+  coarse_prob = torch::Tensor();
+  coarse_features = torch::Tensor();
+  auto centre = out.depth_init;
+  if (fine.first_pass_downscale == 2) {  // 1/8 -> 1/4
+    centre = upsample2_naive(centre.unsqueeze(1)).squeeze(1);
+    confidence = upsample2_naive(confidence.unsqueeze(1)).squeeze(1);
+  }
+  if (fine.resolution_divisor == 2) {
+    const int64_t B = features.size(0), V = features.size(1), C = features.size(2), h = features.size(3), w = features.size(4);
+    features = upsample2_naive(features.view({B * V, C, h, w})).view({B, V, C, 2 * h, 2 * w});
+    centre = upsample2_naive(centre.unsqueeze(1)).squeeze(1);
+    confidence = upsample2_naive(confidence.unsqueeze(1)).squeeze(1);
+  }
+  const auto hypotheses = fine_pass_hypotheses(centre, depth_values, model_->config().depth_sampling, fine);
+  t.regression = lap(t0);
+  const auto fine_volume = fast ? VarianceCostVolume(features, proj_fine, hypotheses, warp).planes(0, fine.planes)
+                                : variance_volume_by_warps(features, proj_fine, hypotheses, warp);
+  features = torch::Tensor();
+  t.fine_cost_volume = lap(t0);
+  const auto fine_prob = torch::softmax(regularize(fine_volume), 1);
+  t.fine_regularization = lap(t0);
+  out.depth = (fine_prob * hypotheses).sum(1);
+  out.confidence = confidence;
+  t.regression += lap(t0);
+  t.cost_volume += t.fine_cost_volume;
+  t.regularization += t.fine_regularization;
+  if (times) *times = t;
+  return out;
+}
+
 VarianceCostVolume::VarianceCostVolume(const torch::Tensor& features, const torch::Tensor& proj,
                                        const torch::Tensor& depth_values, FeatureWarp warp)
     : warp_(warp) {
@@ -302,7 +389,11 @@ VarianceCostVolume::VarianceCostVolume(const torch::Tensor& features, const torc
               "variance_cost_volume: features must be float32 [B,V,C,h,w] on the CPU, got ", features.sizes());
   B_ = features.size(0), V_ = features.size(1), C_ = features.size(2), H_ = features.size(3), W_ = features.size(4);
   TORCH_CHECK(proj.dim() == 4 && proj.size(0) == B_ && proj.size(1) == V_, "variance_cost_volume: proj must be [B,V,4,4]");
-  TORCH_CHECK(depth_values.dim() == 2 && depth_values.size(0) == B_, "variance_cost_volume: depth_values must be [B,D]");
+  // Planes [B,D], or D hypotheses per pixel [B,D,h,w] (a fine pass).
+  per_pixel_ = depth_values.dim() == 4;
+  TORCH_CHECK((depth_values.dim() == 2 || (per_pixel_ && depth_values.size(2) == H_ && depth_values.size(3) == W_)) &&
+                  depth_values.size(0) == B_,
+              "variance_cost_volume: depth_values must be [B,D] or [B,D,h,w], got ", depth_values.sizes());
   D_ = depth_values.size(1);
   torch::NoGradGuard no_grad;
   // Channels last, so that one bilinear tap reads C contiguous floats.
@@ -342,7 +433,9 @@ torch::Tensor VarianceCostVolume::planes(int64_t begin, int64_t end) const {
         for (int64_t c = 0; c < C; ++c) std::fill_n(volume_p + (((b * C + c) * P + p) * H + y) * W, W, 0.0f);
         continue;
       }
-      const float z_plane = depth_p[b * D + d];
+      // The row's hypothesis d: one depth for the plane, or one per pixel.
+      const float* z_row = per_pixel_ ? depth_p + ((b * D + d) * H + y) * W : nullptr;
+      const float z_plane = per_pixel_ ? 0.0f : depth_p[b * D + d];
       const float* ref_row = fea_p + (b * V * HW + y * W) * C;
       for (int64_t i = 0; i < W * C; ++i) {
         sum[i] = ref_row[i];
@@ -355,7 +448,8 @@ torch::Tensor VarianceCostVolume::planes(int64_t begin, int64_t end) const {
         const float* rz = ry + HW;
         const float* t = trans_[v - 1].data_ptr<float>() + b * 3;
         for (int64_t x = 0; x < W; ++x) {
-          const float px = rx[x] * z_plane + t[0], py = ry[x] * z_plane + t[1], pz = rz[x] * z_plane + t[2];
+          const float z = z_row ? z_row[x] : z_plane;
+          const float px = rx[x] * z + t[0], py = ry[x] * z + t[1], pz = rz[x] * z + t[2];
           float gx = px / pz / norm_x - 1.0f, gy = py / pz / norm_y - 1.0f;
           if (!std::isfinite(gx)) gx = -2.0f;  // a point on the source camera plane: outside
           if (!std::isfinite(gy)) gy = -2.0f;

@@ -142,11 +142,14 @@ torch::Tensor homography_warp(const torch::Tensor& src_fea, const torch::Tensor&
                               const torch::Tensor& ref_proj, const torch::Tensor& depth_values, FeatureWarp warp) {
   const int64_t B = src_fea.size(0), C = src_fea.size(1), H = src_fea.size(2), W = src_fea.size(3);
   const int64_t D = depth_values.size(1);
+  TORCH_CHECK(depth_values.dim() == 2 || (depth_values.dim() == 4 && depth_values.size(2) == H && depth_values.size(3) == W),
+              "homography_warp: depth_values must be [B,D] or [B,D,H,W] at the features' size, got ", depth_values.sizes());
   torch::Tensor sample_grid;
   {
     torch::NoGradGuard no_grad;  // the sampling grid depends on cameras only: no gradient needed
     const auto rays = homography_rays(src_proj, ref_proj, H, W);
-    auto rot_depth_xyz = rays.rot_xyz.unsqueeze(2) * depth_values.view({B, 1, D, 1});  // [B,3,D,HW]
+    const auto depth = depth_values.dim() == 2 ? depth_values.view({B, 1, D, 1}) : depth_values.reshape({B, 1, D, H * W});
+    auto rot_depth_xyz = rays.rot_xyz.unsqueeze(2) * depth;  // [B,3,D,HW]
     auto proj_xyz = rot_depth_xyz + rays.trans.view({B, 3, 1, 1});
     auto proj_xy = proj_xyz.slice(1, 0, 2) / proj_xyz.slice(1, 2, 3);
     auto gx = proj_xy.select(1, 0) / ((W - 1) / 2.0) - 1;

@@ -70,9 +70,17 @@ struct DepthEstimatorConfig {
   // real clips were still mostly wrong; docs/results.md). Applied before completion, which then
   // fills such pixels.
   double min_parallax_px = 0.0;
+  // A second pass around the first one's depth (FastMvsNet::forward_coarse_to_fine; off by
+  // default): with it num_depth is the first pass's planes, and the map has the fine pass's
+  // resolution (1/2 or 1/4 of the network input).
+  FinePassConfig fine = {};
 
   void validate() const;  // throws std::invalid_argument naming the field
 };
+
+// A side (width or height) of the first pass's input for a network input side `network_side`
+// (half of it with a fine pass whose first pass runs at half size): what a default plane count follows.
+int first_pass_size(const DepthEstimatorConfig& config, int network_side);
 
 // The relative depth change by which min_parallax_px is judged.
 constexpr double kParallaxDepthChange = 0.1;
@@ -107,10 +115,10 @@ struct SourceTurn {
 };
 
 struct DepthMap {
-  torch::Tensor depth;       // [h,w] float32 metres, CPU (h, w = network input / 4)
+  torch::Tensor depth;       // [h,w] float32 metres, CPU (h, w = network input / 4, or / 2 with a fine pass at 1/2)
   torch::Tensor confidence;  // [h,w] float32 in [0,1], CPU
   torch::Tensor color;       // [h,w,3] uint8: the reference image at the depth pixels
-  Camera camera;             // camera of the depth map: pixel (i,j) <-> network input pixel (4i,4j)
+  Camera camera;             // camera of the depth map: pixel (i,j) <-> network input pixel (4i,4j) (or (2i,2j))
   Camera network_camera;     // camera of the network input image (after resize and crop)
   double depth_min = 0.0, depth_max = 0.0;
   double seconds = 0.0;      // network time, including transfers (all passes)

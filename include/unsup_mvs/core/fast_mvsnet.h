@@ -20,6 +20,7 @@
 #include <memory>
 #include <vector>
 
+#include "unsup_mvs/core/fine_pass.h"
 #include "unsup_mvs/core/mvsnet.h"
 
 namespace umvs {
@@ -31,6 +32,8 @@ struct MvsStageTimes {
   double regularization = 0;  // 3-D U-Net -> logits
   double regression = 0;      // softmax, soft-argmin depth, confidence
   double refinement = 0;      // refinement network (0 without)
+  // Of the above, what the fine pass took (FastMvsNet::forward_coarse_to_fine; 0 without):
+  double fine_cost_volume = 0, fine_regularization = 0;
 };
 
 class FastMvsNet {
@@ -48,6 +51,14 @@ class FastMvsNet {
   // (optional) receives the stage times (only on the fast path, left untouched otherwise).
   MvsOutput forward(const torch::Tensor& images, const torch::Tensor& proj, const torch::Tensor& depth_values,
                     bool keep_prob_volume = false, MvsStageTimes* times = nullptr);
+
+  // forward() with a fine pass after it (FinePassConfig, enabled): depth and confidence at
+  // 1/fine.resolution_divisor of the input; `proj_fine` [B,V,4,4] are the projection matrices at that
+  // scale. The confidence is the first pass's (photometric_confidence of its planes), interpolated
+  // as the depth; depth_init is the first pass's depth at its own resolution. Any device.
+  MvsOutput forward_coarse_to_fine(const torch::Tensor& images, const torch::Tensor& proj, const torch::Tensor& depth_values,
+                                   const FinePassConfig& fine, const torch::Tensor& proj_fine,
+                                   MvsStageTimes* times = nullptr);
 
   // Whether forward() takes the fast path for tensors on `device` (CPU with oneDNN).
   static bool accelerates(const torch::Device& device);
@@ -70,6 +81,7 @@ class FastMvsNet {
 class VarianceCostVolume {
  public:
   // features [B,V,C,h,w] float32 CPU, view 0 the reference; proj [B,V,4,4]; depth_values [B,D]
+  // (planes) or [B,D,h,w] (hypotheses per pixel)
   VarianceCostVolume(const torch::Tensor& features, const torch::Tensor& proj, const torch::Tensor& depth_values,
                      FeatureWarp warp);
   // Planes [begin, end) -> [B,C,end-begin,h,w]; planes outside [0, D) are zeros (convolution padding).
@@ -79,6 +91,7 @@ class VarianceCostVolume {
 
  private:
   int64_t B_ = 0, V_ = 0, C_ = 0, H_ = 0, W_ = 0, D_ = 0;
+  bool per_pixel_ = false;  // depth_ is [B,D,h,w]
   FeatureWarp warp_ = FeatureWarp::kExact;
   torch::Tensor features_;  // [B,V,h,w,C]
   torch::Tensor depth_;     // [B,D]

@@ -78,7 +78,8 @@ HomographyRays homography_rays(const torch::Tensor& src_proj, const torch::Tenso
 
 // MVSNet's differentiable homography warp of source features into the reference frustum.
 //   src_features [B,C,H,W]; src_proj, ref_proj [B,4,4] (mvsnet_projection_matrix at feature
-//   resolution); depth_values [B,D]  -> [B,C,D,H,W], zero outside the source image.
+//   resolution); depth_values [B,D] (planes) or [B,D,H,W] (D hypotheses per pixel)  -> [B,C,D,H,W],
+//   zero outside the source image.
 // With FeatureWarp::kMvsNetPytorch it is bit-compatible with MVSNet_pytorch as run on torch >= 1.3.
 torch::Tensor homography_warp(const torch::Tensor& src_features, const torch::Tensor& src_proj,
                               const torch::Tensor& ref_proj, const torch::Tensor& depth_values, FeatureWarp warp);

@@ -1,0 +1,48 @@
+// The fine pass of a coarse-to-fine depth estimate (FastMvsNet::forward_coarse_to_fine): its
+// settings, its per-pixel hypotheses, and the cost volume over them.
+#pragma once
+
+#include <torch/types.h>
+
+#include "unsup_mvs/core/geometry.h"
+
+namespace umvs {
+
+// A second pass of the same network around the first pass's depth: coarse to fine, as CasMVSNet,
+// with the one set of weights. Per pixel, `planes` hypotheses evenly spread over `span` of the
+// first pass's plane intervals (in its sampling: depth or inverse depth), centred on its depth
+// and moved inside the depth range at its ends; the cost volume is built on the features at
+// 1/`resolution_divisor` of the input (at 1/2 the 1/4-resolution features, interpolated, sampled
+// at twice the positions). What it buys is a cheap first pass: at half the input's size it is a
+// quarter of the work, and the map keeps the full input's resolution (docs/results.md measures
+// what that costs in depth). The refinement network (MvsNetConfig::refine) does not run after a
+// fine pass.
+struct FinePassConfig {
+  int planes = 0;              // multiple of 8; 0 = no fine pass
+  double span = 4.0;           // first-pass plane intervals covered, > 0
+  int resolution_divisor = 4;  // 4 (the first pass's resolution) or 2 (half the input's)
+  // 1: the first pass sees the input as given; 2: the input scaled to half its width and height
+  // (a quarter of the work; depth at 1/8, interpolated for the fine pass).
+  int first_pass_downscale = 1;
+
+  bool enabled() const { return planes > 0; }
+  void validate() const;  // throws std::invalid_argument naming the field
+};
+
+// Per pixel hypotheses of a fine pass (FinePassConfig) around `depth` [B,h,w], the first pass's
+// estimate, whose planes were depth_values [B,D] with `sampling`.  -> [B,planes,h,w] increasing
+torch::Tensor fine_pass_hypotheses(const torch::Tensor& depth, const torch::Tensor& depth_values, DepthSampling sampling,
+                                   const FinePassConfig& fine);
+
+// [B,C,h,w] -> [B,C,2h,2w] under MVSNet's naive scaling: output pixel 2i is input pixel i, output
+// 2i+1 the mean of inputs i and i+1 (the last row and column repeat).
+torch::Tensor upsample2_naive(const torch::Tensor& x);
+
+// MVSNet's variance cost volume over per-view features warped with torch ops (any device; the
+// fast CPU path of the first pass is VarianceCostVolume).
+//   features [B,V,C,h,w], view 0 the reference; proj [B,V,4,4] at that resolution;
+//   hypotheses [B,D] or [B,D,h,w]  -> [B,C,D,h,w]
+torch::Tensor variance_volume_by_warps(const torch::Tensor& features, const torch::Tensor& proj,
+                                       const torch::Tensor& hypotheses, FeatureWarp warp);
+
+}  // namespace umvs
