@@ -11,7 +11,8 @@
 #      the keyframe sets processed and dropped with their p50/p90 times (inference's ~stats).
 # Usage: scripts/demo.sh [WORK_DIR]      (default /tmp/umvs_demo; it is replaced)
 # Environment: DEMO_SCENE (room), DEMO_SEED (7), DEMO_VIEWS (24), DEMO_WIDTH x DEMO_HEIGHT (640 x 512,
-#              the default model's training size; images and inference), DEMO_PLANES (128),
+#              the default model's training size; images and inference), DEMO_PLANES, DEMO_FINE_PLANES,
+#              DEMO_FIRST_PASS_DOWNSCALE, DEMO_FINE_RESOLUTION (empty: config/inference.yaml's planes and passes),
 #              DEMO_RATE (playback factor, 0.25: slow enough for a 2-core CPU to infer every
 #              keyframe at that size), DEMO_RVIZ (1; 0 = no RViz, no screenshot), CHECKPOINT (default model),
 #              DEMO_TEXTURES (none: procedural textures, the same scene on every machine; `installed`
@@ -27,7 +28,10 @@ SEED=${DEMO_SEED:-7}
 VIEWS=${DEMO_VIEWS:-24}
 WIDTH=${DEMO_WIDTH:-640}
 HEIGHT=${DEMO_HEIGHT:-512}
-PLANES=${DEMO_PLANES:-128}
+PLANES=${DEMO_PLANES:-}
+FINE_PLANES=${DEMO_FINE_PLANES:-}
+FIRST_PASS_DOWNSCALE=${DEMO_FIRST_PASS_DOWNSCALE:-}
+FINE_RESOLUTION=${DEMO_FINE_RESOLUTION:-}
 RATE=${DEMO_RATE:-0.25}
 RVIZ=${DEMO_RVIZ:-1}
 TEXTURES=${DEMO_TEXTURES:-none}
@@ -69,9 +73,10 @@ if [[ "$RVIZ" == 1 ]]; then
   pids+=($!)
   export DISPLAY=$display
 fi
-say "replaying at ${RATE}x through replay.launch with $CHECKPOINT, inference at ${WIDTH}x$HEIGHT, $PLANES planes (log: $WORK/launch.log)"
+say "replaying at ${RATE}x through replay.launch with $CHECKPOINT, inference at ${WIDTH}x$HEIGHT (planes and passes: ${PLANES:-from config/inference.yaml}; log: $WORK/launch.log)"
 roslaunch -p "${ROS_MASTER_URI##*:}" unsup_mvs replay.launch bag:="$WORK/scene.bag" checkpoint:="$CHECKPOINT" clouds_dir:="$WORK" \
-  max_width:="$WIDTH" max_height:="$HEIGHT" num_depth:="$PLANES" rate:="$RATE" rviz:=$([[ "$RVIZ" == 1 ]] && echo true || echo false) trainer:=false \
+  max_width:="$WIDTH" max_height:="$HEIGHT" num_depth:="$PLANES" fine_planes:="$FINE_PLANES" \
+  first_pass_downscale:="$FIRST_PASS_DOWNSCALE" fine_resolution:="$FINE_RESOLUTION" rate:="$RATE" rviz:=$([[ "$RVIZ" == 1 ]] && echo true || echo false) trainer:=false \
   complete_below_confidence:="$COMPLETION" >"$WORK/launch.log" 2>&1 &
 pids+=($!)
 

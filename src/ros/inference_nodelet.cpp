@@ -295,12 +295,13 @@ class InferenceNodelet : public nodelet::Nodelet {
     if (config_.num_depth > 0) return;
     const umvs::NetworkResize plan = umvs::plan_network_resize(reference.camera.width, reference.camera.height,
                                                                config_.max_width, config_.max_height);
-    const int planes = umvs::default_plane_count(plan.width);
+    const int planes = umvs::default_plane_count(umvs::first_pass_size(config_, plan.width));
     if (estimator_->config().num_depth == planes) return;
     umvs::DepthEstimatorConfig fitted = config_;
     fitted.num_depth = planes;
     estimator_ = make_estimator(estimator_->model(), device_, fitted, max_planes_);
-    NODELET_INFO("inference: %d depth planes for a %dx%d network input", planes, plan.width, plan.height);
+    NODELET_INFO("inference: %d depth planes for a %dx%d network input%s", planes, plan.width, plan.height,
+                 config_.fine.enabled() ? " (the first pass's, then a fine pass)" : "");
   }
 
   // Corrects the keyframe set's cameras by the online pose refinement (under model_mutex_) and says

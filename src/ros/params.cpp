@@ -96,6 +96,10 @@ void InferenceNodeConfig::validate() const {
     throw std::invalid_argument("num_depth " + std::to_string(estimator.num_depth) + " is more than max_planes " +
                                 std::to_string(max_planes));
   }
+  if (estimator.fine.planes > max_planes) {
+    throw std::invalid_argument("fine_planes " + std::to_string(estimator.fine.planes) + " is more than max_planes " +
+                                std::to_string(max_planes));
+  }
 }
 
 InferenceNodeConfig inference_node_config_from_ros(const ros::NodeHandle& nh) {
@@ -111,6 +115,10 @@ InferenceNodeConfig inference_node_config_from_ros(const ros::NodeHandle& nh) {
   nh.param("source_rotation_search_deg", c.estimator.source_rotation_search_deg, c.estimator.source_rotation_search_deg);
   nh.param("complete_below_confidence", c.estimator.completion.min_confidence, c.estimator.completion.min_confidence);
   nh.param("min_parallax_px", c.estimator.min_parallax_px, c.estimator.min_parallax_px);
+  nh.param("fine_planes", c.estimator.fine.planes, c.estimator.fine.planes);
+  nh.param("fine_span", c.estimator.fine.span, c.estimator.fine.span);
+  nh.param("fine_resolution", c.estimator.fine.resolution_divisor, c.estimator.fine.resolution_divisor);
+  nh.param("first_pass_downscale", c.estimator.fine.first_pass_downscale, c.estimator.fine.first_pass_downscale);
   nh.param("rectified", c.rectified, c.rectified);
   nh.param("checkpoint", c.checkpoint, c.checkpoint);
   nh.param("max_image_pixels", c.max_image_pixels, c.max_image_pixels);

@@ -173,10 +173,14 @@ int bench_pipeline(const Args& args, const torch::Device& device) {
   scene_cfg.gt_cloud_samples = 0;
   const SynthScene scene = render_synthetic_scene(scene_cfg);
   DepthEstimatorConfig cfg = recommended_estimator_config();
+  if (args.given("fine-planes")) cfg.fine.planes = args.integer("fine-planes");
+  if (args.given("fine-span")) cfg.fine.span = args.real("fine-span");
+  if (args.given("fine-resolution")) cfg.fine.resolution_divisor = args.integer("fine-resolution");
+  if (args.given("first-pass-downscale")) cfg.fine.first_pass_downscale = args.integer("first-pass-downscale");
   if (args.given("num-depth")) cfg.num_depth = args.integer("num-depth");
-  else cfg.num_depth = default_plane_count(plan_network_resize(W, H, cfg.max_width, cfg.max_height).width);
+  else cfg.num_depth = default_plane_count(first_pass_size(cfg, plan_network_resize(W, H, cfg.max_width, cfg.max_height).width));
   DepthEstimator estimator(load_model(args.str("checkpoint"), device).model, device, cfg);
-  std::vector<double> total, network, first_pass, completion, features, volume, unet;
+  std::vector<double> total, network, first_pass, completion, features, volume, unet, fine_pass;
   int extra_passes = 0, width = 0, height = 0;
   for (int r = 0; r < warmup + runs; ++r) {
     const size_t ref = static_cast<size_t>(r) % scene.views.size();
@@ -197,6 +201,7 @@ int bench_pipeline(const Args& args, const torch::Device& device) {
     features.push_back(st.features);
     volume.push_back(st.cost_volume);
     unet.push_back(st.regularization);
+    fine_pass.push_back(st.fine_cost_volume + st.fine_regularization);
     extra_passes += map.per_source_passes ? 1 : 0;
     width = map.camera.width;
     height = map.camera.height;
@@ -232,6 +237,7 @@ int bench_pipeline(const Args& args, const torch::Device& device) {
     line("  features", features);
     line("  cost volume", volume);
     line("  3-D U-Net", unet);
+    if (cfg.fine.enabled()) line("  of which the fine pass", fine_pass);
     line("completion", completion);
   }
   return 0;
@@ -253,6 +259,14 @@ UMVS_COMMAND(bench, "time and memory of the network on synthetic input") {
       .option("height", "512", "image height (multiple of 32)")
       .option("num-depth", "128", "depth hypotheses")
       .option("views", "3", "views per depth map")
+      .option("fine-planes", umvs::recommended_estimator_config().fine.planes,
+              "pipeline: hypotheses per pixel of the second, finer pass (0 = one pass)")
+      .option("fine-span", umvs::recommended_estimator_config().fine.span,
+              "pipeline: first-pass plane intervals the second pass covers")
+      .option("fine-resolution", umvs::recommended_estimator_config().fine.resolution_divisor,
+              "pipeline: 2 | 4, the second pass's resolution (1/2 or 1/4 of the input)")
+      .option("first-pass-downscale", umvs::recommended_estimator_config().fine.first_pass_downscale,
+              "pipeline: 2 = the first pass at half the input's size")
       .option("sources", "10", "fusion: source views per reference")
       .option("threads", 2, "CPU threads")
       .option("device", "cpu", "cpu | cuda")

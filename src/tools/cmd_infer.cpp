@@ -78,6 +78,15 @@ UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
               "confidence 0 (unknown) where a 10 % change of depth moves the pixel by less than this many pixels in "
               "every source: too little parallax to tell depth (a camera turning in place, a short baseline); 0 = off")
       .option("num-depth", "0", "depth planes (multiple of 8; 0 = 128 at 640 wide, scaled with the width)")
+      .option("fine-planes", umvs::DepthEstimatorConfig{}.fine.planes,
+              "a second pass with this many hypotheses per pixel around the first pass's depth (coarse to fine; "
+              "multiple of 8; --num-depth is then the first pass's planes; 0 = one pass)")
+      .option("fine-span", umvs::DepthEstimatorConfig{}.fine.span,
+              "the second pass's hypotheses cover this many of the first pass's plane intervals")
+      .option("fine-resolution", umvs::DepthEstimatorConfig{}.fine.resolution_divisor,
+              "the second pass's resolution, and the depth map's: 1/2 or 1/4 of the network input (2 | 4)")
+      .option("first-pass-downscale", umvs::DepthEstimatorConfig{}.fine.first_pass_downscale,
+              "with --fine-planes: 2 = the first pass sees the input at half its size (1 = as given)")
       .option("depth-sampling", "", "depth|inverse_depth (default: the checkpoint's)")
       .option("feature-warp", "", "exact|mvsnet_pytorch: where the cost volume samples the source views (default: the checkpoint's)")
       .option("max-width", "0", "scale images down to at most this width (0 = keep)")
@@ -123,6 +132,10 @@ UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
   cfg.source_rotation_search_deg = args.real("source-rotation-search");
   cfg.completion.min_confidence = args.real("complete-below-confidence");
   cfg.min_parallax_px = args.real("min-parallax-px");
+  cfg.fine.planes = args.integer("fine-planes");
+  cfg.fine.span = args.real("fine-span");
+  cfg.fine.resolution_divisor = args.integer("fine-resolution");
+  cfg.fine.first_pass_downscale = args.integer("first-pass-downscale");
   if (!(cfg.completion.min_confidence >= 0 && cfg.completion.min_confidence < 1)) {
     throw std::invalid_argument("--complete-below-confidence must be a confidence in [0,1) (0 = off), got " +
                                 args.str("complete-below-confidence"));
@@ -147,8 +160,10 @@ UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
     const auto& first = view(refs.front()).cam.camera;
     plan = umvs::plan_network_resize(first.width, first.height, cfg.max_width, cfg.max_height);
   }
-  const umvs::PlaneCount planes = umvs::choose_plane_count(args.integer("num-depth"), "--num-depth", plan.width,
-                                                           plan.height, loaded.model->config().num_depth);
+  const umvs::PlaneCount planes = umvs::choose_plane_count(args.integer("num-depth"), "--num-depth",
+                                                           umvs::first_pass_size(cfg, plan.width),
+                                                           umvs::first_pass_size(cfg, plan.height),
+                                                           loaded.model->config().num_depth);
   cfg.num_depth = planes.planes;
   umvs::DepthEstimator estimator(loaded.model, device, cfg);  // refuses a bad --source-rotation-search
   std::cerr << "model: " << args.str("checkpoint") << " (" << loaded.format << ", " << loaded.model->config().to_string()

@@ -1,7 +1,8 @@
 // rostest for the inference node: lazy subscription, reload_model (refuses a corrupt checkpoint and
 // keeps the old model), DepthEstimate outputs (stamps, frames, sizes, intrinsics, ranges), bad
 // keyframe sets (unsupported encoding, NaN pose, impossible depth range) logged and skipped, and
-// latest-wins when sets arrive faster than the network runs, with ~stats accounting for every set.
+// latest-wins when sets arrive faster than the network runs, with ~stats accounting for every set,
+// and a fine pass's half-resolution maps.
 #include <torch/torch.h>
 
 #include <cmath>
@@ -239,6 +240,38 @@ TEST_F(InferenceTest, RefinedPosesAreSentWithTheirEstimates) {
   EXPECT_TRUE(log.wait_for("its poses are not refined", 30.0)) << log.all();
   ASSERT_TRUE(wait_for([&] { return got.size() == 2; }, 60.0)) << log.all();
   EXPECT_EQ(got.back()->keyframe_id, 50u);
+}
+
+TEST_F(InferenceTest, FinePassMakesHalfResolutionMaps) {
+  // inference.test's third node runs a fine pass at half the input's resolution (~fine_planes,
+  // ~fine_resolution): its maps and their intrinsics are half of the 128x96 input, its depth inside
+  // the set's range.
+  umvs_test::RosoutCapture log(nh_);
+  ros::Publisher pub = nh_.advertise<unsup_mvs::KeyframeSet>("/fine/keyframes", 10);
+  ros::ServiceClient reload = nh_.serviceClient<unsup_mvs::ReloadModel>("/inference_fine/reload_model");
+  ASSERT_TRUE(reload.waitForExistence(ros::Duration(30.0))) << "inference_fine did not come up";
+  std::vector<unsup_mvs::DepthEstimateConstPtr> got;
+  ros::Subscriber sub = nh_.subscribe<unsup_mvs::DepthEstimate>(
+      "/fine/depth_estimate", 10, [&](const unsup_mvs::DepthEstimateConstPtr& m) { got.push_back(m); });
+  ASSERT_TRUE(wait_for([&] { return pub.getNumSubscribers() > 0; }, 10.0));
+  unsup_mvs::ReloadModel srv;
+  srv.request.checkpoint = dir_ + "/model.pt";
+  ASSERT_TRUE(reload.call(srv) && srv.response.success) << srv.response.message;
+
+  pub.publish(make_set(60));
+  ASSERT_TRUE(wait_for([&] { return !got.empty(); }, 60.0)) << log.all();
+  const auto& e = *got.front();
+  EXPECT_EQ(e.keyframe_id, 60u);
+  EXPECT_EQ(e.depth.width, kWidth / 2u);
+  EXPECT_EQ(e.depth.height, kHeight / 2u);
+  EXPECT_EQ(e.confidence.width, kWidth / 2u);
+  EXPECT_EQ(e.image.width, kWidth / 2u);
+  EXPECT_EQ(e.camera_info.width, kWidth / 2u);
+  EXPECT_NEAR(e.camera_info.K[0], kFocal / 2, 1e-9);
+  const float* d = reinterpret_cast<const float*>(e.depth.data.data());
+  for (size_t i = 0; i < e.depth.width * e.depth.height; ++i) {
+    ASSERT_TRUE(d[i] >= 1.0f - 1e-4f && d[i] <= 3.0f + 1e-4f) << d[i];
+  }
 }
 
 }  // namespace
