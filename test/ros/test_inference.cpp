@@ -58,6 +58,22 @@ class InferenceTest : public ::testing::Test {
     return srv.response.success;
   }
 
+  // One of inference.test's other nodes, on topics under /<topics>/: its keyframes publisher, the
+  // estimates it sends (into *got), the test model loaded. Fails the test when it does not come up.
+  ros::Publisher connect(const std::string& node, const std::string& topics, ros::Subscriber* sub,
+                         std::vector<unsup_mvs::DepthEstimateConstPtr>* got) {
+    ros::Publisher pub = nh_.advertise<unsup_mvs::KeyframeSet>("/" + topics + "/keyframes", 10);
+    ros::ServiceClient reload = nh_.serviceClient<unsup_mvs::ReloadModel>("/" + node + "/reload_model");
+    EXPECT_TRUE(reload.waitForExistence(ros::Duration(30.0))) << node << " did not come up";
+    *sub = nh_.subscribe<unsup_mvs::DepthEstimate>("/" + topics + "/depth_estimate", 10,
+                                                   [got](const unsup_mvs::DepthEstimateConstPtr& m) { got->push_back(m); });
+    EXPECT_TRUE(wait_for([&] { return pub.getNumSubscribers() > 0; }, 10.0));
+    unsup_mvs::ReloadModel srv;
+    srv.request.checkpoint = dir_ + "/model.pt";
+    EXPECT_TRUE(reload.call(srv) && srv.response.success) << srv.response.message;
+    return pub;
+  }
+
   static std::string dir_;
   ros::NodeHandle nh_;
   ros::Publisher keyframes_pub_;
@@ -205,16 +221,10 @@ TEST_F(InferenceTest, RefinedPosesAreSentWithTheirEstimates) {
   // pose as given (through the refinement's camera and back). A set without source ids is served
   // with its poses as given, and a warning says why.
   umvs_test::RosoutCapture log(nh_);
-  ros::Publisher pub = nh_.advertise<unsup_mvs::KeyframeSet>("/refining/keyframes", 10);
-  ros::ServiceClient reload = nh_.serviceClient<unsup_mvs::ReloadModel>("/inference_refining/reload_model");
-  ASSERT_TRUE(reload.waitForExistence(ros::Duration(30.0))) << "inference_refining did not come up";
   std::vector<unsup_mvs::DepthEstimateConstPtr> got;
-  ros::Subscriber sub = nh_.subscribe<unsup_mvs::DepthEstimate>(
-      "/refining/depth_estimate", 10, [&](const unsup_mvs::DepthEstimateConstPtr& m) { got.push_back(m); });
-  ASSERT_TRUE(wait_for([&] { return pub.getNumSubscribers() > 0; }, 10.0));
-  unsup_mvs::ReloadModel srv;
-  srv.request.checkpoint = dir_ + "/model.pt";
-  ASSERT_TRUE(reload.call(srv) && srv.response.success) << srv.response.message;
+  ros::Subscriber sub;
+  ros::Publisher pub = connect("inference_refining", "refining", &sub, &got);
+  ASSERT_FALSE(HasFailure());
 
   auto set = make_set(40);
   set.reference_pose = umvs_test::make_pose({0.2, -0.1, 0.3}, 5.0);
@@ -247,16 +257,10 @@ TEST_F(InferenceTest, FinePassMakesHalfResolutionMaps) {
   // ~fine_resolution): its maps and their intrinsics are half of the 128x96 input, its depth inside
   // the set's range.
   umvs_test::RosoutCapture log(nh_);
-  ros::Publisher pub = nh_.advertise<unsup_mvs::KeyframeSet>("/fine/keyframes", 10);
-  ros::ServiceClient reload = nh_.serviceClient<unsup_mvs::ReloadModel>("/inference_fine/reload_model");
-  ASSERT_TRUE(reload.waitForExistence(ros::Duration(30.0))) << "inference_fine did not come up";
   std::vector<unsup_mvs::DepthEstimateConstPtr> got;
-  ros::Subscriber sub = nh_.subscribe<unsup_mvs::DepthEstimate>(
-      "/fine/depth_estimate", 10, [&](const unsup_mvs::DepthEstimateConstPtr& m) { got.push_back(m); });
-  ASSERT_TRUE(wait_for([&] { return pub.getNumSubscribers() > 0; }, 10.0));
-  unsup_mvs::ReloadModel srv;
-  srv.request.checkpoint = dir_ + "/model.pt";
-  ASSERT_TRUE(reload.call(srv) && srv.response.success) << srv.response.message;
+  ros::Subscriber sub;
+  ros::Publisher pub = connect("inference_fine", "fine", &sub, &got);
+  ASSERT_FALSE(HasFailure());
 
   pub.publish(make_set(60));
   ASSERT_TRUE(wait_for([&] { return !got.empty(); }, 60.0)) << log.all();
