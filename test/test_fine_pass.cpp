@@ -149,6 +149,10 @@ TEST(FinePass, TwoPassesFollowTheirDefinition) {
     ASSERT_EQ(out.confidence.sizes(), out.depth.sizes());
     EXPECT_GT(times.fine_cost_volume, 0.0);
     EXPECT_GT(times.fine_regularization, 0.0);
+    // The training path's two passes (torch ops, the model's own U-Net) are the same.
+    const MvsOutput reference = coarse_to_fine_forward(*model, images, proj, planes, fine, proj_fine);
+    EXPECT_LT(((out.depth - reference.depth).abs() / reference.depth).max().item<double>(), 1e-4);
+    EXPECT_LT((out.confidence - reference.confidence).abs().max().item<double>(), 1e-4);
     // The fine pass by its definition: the variance over its hypotheses through the same 3-D U-Net.
     auto centre = out.depth_init;
     auto features = model->view_features(images);
@@ -174,6 +178,53 @@ TEST(FinePass, TwoPassesFollowTheirDefinition) {
   EXPECT_EQ(out.depth_init.sizes(), (std::vector<int64_t>{1, H / 8, W / 8}));
   EXPECT_EQ(out.depth.sizes(), (std::vector<int64_t>{1, H / 4, W / 4}));
   EXPECT_TRUE(torch::isfinite(out.depth).all().item<bool>());
+  const MvsOutput reference = coarse_to_fine_forward(*model, images, proj, planes, half, proj);
+  EXPECT_LT(((out.depth_init - reference.depth_init).abs() / reference.depth_init).max().item<double>(), 1e-4);
+  EXPECT_LT(((out.depth - reference.depth).abs() / reference.depth).max().item<double>(), 1e-4);
+  // A half-size first pass needs an input in multiples of 64, and says so.
+  const auto odd = images.narrow(4, 0, 96);
+  const auto odd_proj = mvsnet_projection_matrices(row_of_cameras(96, H)).unsqueeze(0);
+  try {
+    fast.forward_coarse_to_fine(odd, odd_proj, planes, half, odd_proj);
+    ADD_FAILURE() << "a 96x64 input was accepted for a half-size first pass";
+  } catch (const c10::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("multiples of 64, got 96x64"), std::string::npos) << e.what();
+  }
+}
+
+TEST(FinePass, TrainingLearnsBothPassesWithoutAGradientThroughTheHypotheses) {
+  torch::manual_seed(3);
+  MvsNet model = sharpened_random_model();
+  model->train();
+  const int W = 128, H = 64;
+  const auto cams = row_of_cameras(W, H);
+  const auto images = torch::rand({1, 3, 3, H, W});
+  const auto proj = mvsnet_projection_matrices(cams).unsqueeze(0);
+  const auto planes = depth_hypotheses(2.0, 4.5, 16, DepthSampling::kUniformInverseDepth).unsqueeze(0);
+  FinePassConfig fine;
+  fine.planes = 8;
+  fine.resolution_divisor = 2;
+  fine.first_pass_downscale = 2;
+  const auto proj_fine = mvsnet_projection_matrices(cams, 0.5).unsqueeze(0);
+  const MvsOutput out = coarse_to_fine_forward(*model, images, proj, planes, fine, proj_fine);
+  ASSERT_EQ(out.depth.sizes(), (std::vector<int64_t>{1, H / 2, W / 2}));
+  ASSERT_TRUE(out.depth.requires_grad());
+  ASSERT_TRUE(out.depth_init.requires_grad());  // the first pass learns from its own loss
+  // The map's depth does not depend on the first pass's depth: its hypotheses are detached.
+  const auto through_first_pass = torch::autograd::grad({out.depth.sum()}, {out.depth_init}, {}, /*retain_graph=*/true,
+                                                        /*create_graph=*/false, /*allow_unused=*/true);
+  EXPECT_FALSE(through_first_pass[0].defined());
+  // Both losses reach the weights they share: the 2-D features and the 3-D U-Net.
+  for (const auto* depth : {&out.depth, &out.depth_init}) {
+    model->zero_grad();
+    depth->sum().backward({}, /*retain_graph=*/true);
+    for (const char* name : {"feature.conv0.conv.weight", "cost_regularization.prob.weight"}) {
+      const auto grad = model->named_parameters()[name].grad();
+      ASSERT_TRUE(grad.defined()) << name;
+      EXPECT_GT(grad.abs().sum().item<double>(), 0.0) << name;
+      EXPECT_TRUE(torch::isfinite(grad).all().item<bool>()) << name;
+    }
+  }
 }
 
 }  // namespace

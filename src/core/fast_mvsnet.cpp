@@ -310,71 +310,47 @@ MvsOutput FastMvsNet::forward(const torch::Tensor& images, const torch::Tensor& 
 MvsOutput FastMvsNet::forward_coarse_to_fine(const torch::Tensor& images, const torch::Tensor& proj,
                                              const torch::Tensor& depth_values, const FinePassConfig& fine,
                                              const torch::Tensor& proj_fine, MvsStageTimes* times) {
-  fine.validate();
-  TORCH_CHECK(fine.enabled(), "forward_coarse_to_fine: the fine pass is off");
-  TORCH_CHECK(proj_fine.sizes() == proj.sizes(), "forward_coarse_to_fine: proj_fine must be [B,V,4,4] as proj");
   torch::NoGradGuard no_grad;
-  MvsNetImpl::check_inputs(images, proj, depth_values);
+  check_coarse_to_fine_inputs(images, proj, depth_values, fine, proj_fine);
   const bool fast = unet_ && accelerates(images.device()) && images.scalar_type() == torch::kFloat32;
+  if (!fast) return coarse_to_fine_forward(*model_, images, proj, depth_values, fine, proj_fine);
   const FeatureWarp warp = model_->config().feature_warp;
   MvsStageTimes t;
   auto t0 = Clock::now();
   auto features = model_->view_features(images);  // [B,V,32,h,w]
-  // The first pass's views and projections: the input's, or at half its size (the first two rows
-  // of the projection matrices scale with the features).
+  // The first pass's views and projections: the input's, or at half its size.
   auto coarse_features = features;
   auto coarse_proj = proj;
   if (fine.first_pass_downscale == 2) {
-    const int64_t B = images.size(0), V = images.size(1), H = images.size(3), W = images.size(4);
-    const auto half = torch::avg_pool2d(images.reshape({B * V, 3, H, W}), 2).view({B, V, 3, H / 2, W / 2});
-    coarse_features = model_->view_features(half);
-    const auto row_scale = torch::tensor({0.5f, 0.5f, 1.0f, 1.0f}, proj.options()).view({1, 1, 4, 1});
-    coarse_proj = proj * row_scale;
+    const auto [half_images, half_proj] = half_size_views(images, proj);
+    coarse_features = model_->view_features(half_images);
+    coarse_proj = half_proj;
   }
   t.features = lap(t0);
-  const auto regularize = [&](const torch::Tensor& volume) {
-    return fast ? unet_->forward(volume) : model_->cost_regularization->forward(volume);
-  };
   torch::Tensor coarse_prob;
-  if (fast) {
+  {
     const VarianceCostVolume volume(coarse_features, coarse_proj, depth_values, warp);
     t.cost_volume = lap(t0);
     double volume_seconds = 0;
     coarse_prob = torch::softmax(unet_->forward(volume, slab_floats_, &volume_seconds), 1);
     t.cost_volume += volume_seconds;
     t.regularization = lap(t0) - volume_seconds;
-  } else {
-    const auto volume = variance_volume_by_warps(coarse_features, coarse_proj, depth_values, warp);
-    t.cost_volume = lap(t0);
-    coarse_prob = torch::softmax(regularize(volume), 1);
-    t.regularization = lap(t0);
   }
+  coarse_features = torch::Tensor();
   MvsOutput out;
   out.depth_init = expected_depth(coarse_prob, depth_values);
-  auto confidence = photometric_confidence(coarse_prob);
+  FineGrid grid = to_fine_grid(out.depth_init, photometric_confidence(coarse_prob), features, fine);
   coarse_prob = torch::Tensor();
-  coarse_features = torch::Tensor();
-  auto centre = out.depth_init;
-  if (fine.first_pass_downscale == 2) {  // 1/8 -> 1/4
-    centre = upsample2_naive(centre.unsqueeze(1)).squeeze(1);
-    confidence = upsample2_naive(confidence.unsqueeze(1)).squeeze(1);
-  }
-  if (fine.resolution_divisor == 2) {
-    const int64_t B = features.size(0), V = features.size(1), C = features.size(2), h = features.size(3), w = features.size(4);
-    features = upsample2_naive(features.view({B * V, C, h, w})).view({B, V, C, 2 * h, 2 * w});
-    centre = upsample2_naive(centre.unsqueeze(1)).squeeze(1);
-    confidence = upsample2_naive(confidence.unsqueeze(1)).squeeze(1);
-  }
-  const auto hypotheses = fine_pass_hypotheses(centre, depth_values, model_->config().depth_sampling, fine);
-  t.regression = lap(t0);
-  const auto fine_volume = fast ? VarianceCostVolume(features, proj_fine, hypotheses, warp).planes(0, fine.planes)
-                                : variance_volume_by_warps(features, proj_fine, hypotheses, warp);
   features = torch::Tensor();
+  const auto hypotheses = fine_pass_hypotheses(grid.depth, depth_values, model_->config().depth_sampling, fine);
+  t.regression = lap(t0);
+  const auto fine_volume = VarianceCostVolume(grid.features, proj_fine, hypotheses, warp).planes(0, fine.planes);
+  grid.features = torch::Tensor();
   t.fine_cost_volume = lap(t0);
-  const auto fine_prob = torch::softmax(regularize(fine_volume), 1);
+  const auto fine_prob = torch::softmax(unet_->forward(fine_volume), 1);
   t.fine_regularization = lap(t0);
   out.depth = (fine_prob * hypotheses).sum(1);
-  out.confidence = confidence;
+  out.confidence = grid.confidence;
   t.regression += lap(t0);
   t.cost_volume += t.fine_cost_volume;
   t.regularization += t.fine_regularization;

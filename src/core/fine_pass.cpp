@@ -79,4 +79,70 @@ torch::Tensor variance_volume_by_warps(const torch::Tensor& features, const torc
   return sq_sum.div_(n).sub_(sum.div_(n).square());
 }
 
+void check_coarse_to_fine_inputs(const torch::Tensor& images, const torch::Tensor& proj,
+                                 const torch::Tensor& depth_values, const FinePassConfig& fine,
+                                 const torch::Tensor& proj_fine) {
+  fine.validate();
+  TORCH_CHECK(fine.enabled(), "coarse to fine: the fine pass is off (fine planes 0)");
+  MvsNetImpl::check_inputs(images, proj, depth_values);
+  TORCH_CHECK(proj_fine.sizes() == proj.sizes(), "coarse to fine: proj_fine must be [B,V,4,4] as proj, got ",
+              proj_fine.sizes());
+  const int64_t H = images.size(3), W = images.size(4);
+  TORCH_CHECK(fine.first_pass_downscale == 1 || (H % 64 == 0 && W % 64 == 0),
+              "coarse to fine: a first pass at half size needs the input's width and height to be multiples of 64, got ",
+              W, "x", H);
+}
+
+std::pair<torch::Tensor, torch::Tensor> half_size_views(const torch::Tensor& images, const torch::Tensor& proj) {
+  const int64_t B = images.size(0), V = images.size(1), H = images.size(3), W = images.size(4);
+  auto half = torch::avg_pool2d(images.reshape({B * V, 3, H, W}), 2).view({B, V, 3, H / 2, W / 2});
+  const auto row_scale = torch::tensor({0.5f, 0.5f, 1.0f, 1.0f}, proj.options()).view({1, 1, 4, 1});
+  return {half, proj * row_scale};
+}
+
+FineGrid to_fine_grid(const torch::Tensor& depth, const torch::Tensor& confidence, const torch::Tensor& features,
+                      const FinePassConfig& fine) {
+  const auto up = [](const torch::Tensor& map) { return upsample2_naive(map.unsqueeze(1)).squeeze(1); };
+  FineGrid grid{depth, confidence, features};
+  if (fine.first_pass_downscale == 2) grid.depth = up(grid.depth), grid.confidence = up(grid.confidence);  // 1/8 -> 1/4
+  if (fine.resolution_divisor == 2) {  // 1/4 -> 1/2
+    const int64_t B = features.size(0), V = features.size(1), C = features.size(2), h = features.size(3), w = features.size(4);
+    grid.features = upsample2_naive(features.reshape({B * V, C, h, w})).view({B, V, C, 2 * h, 2 * w});
+    grid.depth = up(grid.depth), grid.confidence = up(grid.confidence);
+  }
+  return grid;
+}
+
+MvsOutput coarse_to_fine_forward(MvsNetImpl& model, const torch::Tensor& images, const torch::Tensor& proj,
+                                 const torch::Tensor& depth_values, const FinePassConfig& fine,
+                                 const torch::Tensor& proj_fine) {
+  check_coarse_to_fine_inputs(images, proj, depth_values, fine, proj_fine);
+  const FeatureWarp warp = model.config().feature_warp;
+  const auto features = model.view_features(images);  // [B,V,32,H/4,W/4]
+  auto [coarse_features, coarse_proj] = std::make_pair(features, proj);
+  if (fine.first_pass_downscale == 2) {
+    const auto [half_images, half_proj] = half_size_views(images, proj);
+    coarse_features = model.view_features(half_images);
+    coarse_proj = half_proj;
+  }
+  const auto coarse_volume = variance_volume_by_warps(coarse_features, coarse_proj, depth_values, warp);
+  const auto coarse_prob = torch::softmax(model.cost_regularization->forward(coarse_volume), 1);
+  MvsOutput out;
+  out.depth_init = expected_depth(coarse_prob, depth_values);
+  torch::Tensor confidence;
+  {
+    torch::NoGradGuard no_grad;
+    confidence = photometric_confidence(coarse_prob);
+  }
+  // The hypotheses follow the first pass's depth without a gradient through it (CasMVSNet): each
+  // pass learns from its own loss.
+  const FineGrid grid = to_fine_grid(out.depth_init.detach(), confidence, features, fine);
+  const auto hypotheses = fine_pass_hypotheses(grid.depth, depth_values, model.config().depth_sampling, fine);
+  const auto fine_volume = variance_volume_by_warps(grid.features, proj_fine, hypotheses, warp);
+  const auto fine_prob = torch::softmax(model.cost_regularization->forward(fine_volume), 1);
+  out.depth = (fine_prob * hypotheses).sum(1);
+  out.confidence = grid.confidence;
+  return out;
+}
+
 }  // namespace umvs

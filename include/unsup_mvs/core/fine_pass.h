@@ -4,7 +4,10 @@
 
 #include <torch/types.h>
 
+#include <utility>
+
 #include "unsup_mvs/core/geometry.h"
+#include "unsup_mvs/core/mvsnet.h"
 
 namespace umvs {
 
@@ -44,5 +47,33 @@ torch::Tensor upsample2_naive(const torch::Tensor& x);
 //   hypotheses [B,D] or [B,D,h,w]  -> [B,C,D,h,w]
 torch::Tensor variance_volume_by_warps(const torch::Tensor& features, const torch::Tensor& proj,
                                        const torch::Tensor& hypotheses, FeatureWarp warp);
+
+// Throws c10::Error naming the bad argument of a coarse-to-fine forward pass: images, proj and
+// depth_values as MvsNetImpl::forward; proj_fine [B,V,4,4] at 1/fine.resolution_divisor; with a
+// half-size first pass the input's width and height must be multiples of 64.
+void check_coarse_to_fine_inputs(const torch::Tensor& images, const torch::Tensor& proj,
+                                 const torch::Tensor& depth_values, const FinePassConfig& fine,
+                                 const torch::Tensor& proj_fine);
+
+// The first pass's views at half the input's size: images [B,V,3,H,W] box-filtered 2x2, and proj
+// [B,V,4,4] with its first two rows halved (they scale with the features).
+std::pair<torch::Tensor, torch::Tensor> half_size_views(const torch::Tensor& images, const torch::Tensor& proj);
+
+// The first pass's depth and confidence [B,h,w], and the views' features [B,V,C,h',w'] at 1/4 of
+// the input, brought to the fine pass's grid (naive 2x steps, upsample2_naive).
+struct FineGrid {
+  torch::Tensor depth, confidence, features;
+};
+FineGrid to_fine_grid(const torch::Tensor& depth, const torch::Tensor& confidence, const torch::Tensor& features,
+                      const FinePassConfig& fine);
+
+// Both passes with the model's own modules and torch ops, differentiable for training (the fine
+// pass's hypotheses are detached from the first pass, as in CasMVSNet): the reference of the fast
+// inference path (FastMvsNet::forward_coarse_to_fine), which it runs off the fast CPU route.
+//   -> depth [B,H/d,W/d] (d = resolution_divisor); depth_init: the first pass's depth at its own
+//   1/4 (or 1/8) grid; confidence: the first pass's, on the map's grid. No refinement network.
+MvsOutput coarse_to_fine_forward(MvsNetImpl& model, const torch::Tensor& images, const torch::Tensor& proj,
+                                 const torch::Tensor& depth_values, const FinePassConfig& fine,
+                                 const torch::Tensor& proj_fine);
 
 }  // namespace umvs
