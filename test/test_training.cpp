@@ -59,6 +59,23 @@ TEST(TrainingData, CroppedTuplesKeepGeometryConsistent) {
     // the 1/4-resolution grid keep it above zero).
     const double l_gt = at(gt), l_far = at(gt * 1.15), l_near = at(gt * 0.87);
     EXPECT_LT(l_gt, 0.85 * std::min(l_far, l_near)) << t.name << ": at GT " << l_gt << ", x1.15 " << l_far << ", x0.87 " << l_near;
+    // The half-resolution grid of a fine pass agrees as well; its pixel (2i, 2j) is the quarter
+    // grid's (i, j), both on input pixel (4i, 4j).
+    const auto h = make_training_batch({t}, 16, DepthSampling::kUniformDepth, torch::kCPU, /*map_divisor=*/2);
+    ASSERT_EQ(h.loss_ref.sizes(), (std::vector<int64_t>{1, 3, 48, 64}));
+    EXPECT_NEAR(h.K_ref[0][0][0].item<double>(), 2 * b.K_ref[0][0][0].item<double>(), 1e-4);
+    EXPECT_TRUE(torch::equal(h.depth_gt.slice(1, 0, 48, 2).slice(2, 0, 64, 2), b.depth_gt));
+    EXPECT_TRUE(torch::allclose(h.proj_map, mvsnet_projection_matrices({t.network_views[0].camera,
+                                                                        t.network_views[1].camera,
+                                                                        t.network_views[2].camera}, 0.5)
+                                                .unsqueeze(0)));
+    const auto gt_half = h.depth_gt.clamp_min(0.1);
+    auto at_half = [&](const torch::Tensor& d) {
+      return unsupervised_loss(h.loss_ref, h.loss_src, h.K_ref, h.K_src, h.T_src_ref, d, lc).photometric.item<double>();
+    };
+    const double h_gt = at_half(gt_half), h_far = at_half(gt_half * 1.15), h_near = at_half(gt_half * 0.87);
+    EXPECT_LT(h_gt, 0.85 * std::min(h_far, h_near)) << t.name << " at 1/2: at GT " << h_gt << ", x1.15 " << h_far
+                                                    << ", x0.87 " << h_near;
   }
   // Deterministic (no rng) tuples are centre crops and repeatable.
   const auto a = source.tuple(2, nullptr), c = source.tuple(2, nullptr);
@@ -266,6 +283,52 @@ TEST(Training, ShortRunFromRandomWeightsReducesDepthError) {
   EXPECT_LT(last_loss, 0.8 * first_loss);
   EXPECT_LT(after.depth.mean_abs, 0.6 * before.depth.mean_abs);
   EXPECT_LT(after.loss.photometric, before.loss.photometric);
+}
+
+TEST(Training, CoarseToFineRunFromRandomWeightsReducesDepthError) {
+  // As the run above, with both passes: the first on the images at half size, the map at 1/2 of
+  // the input from a fine pass; the loss on both passes' depth.
+  const std::string dir = write_scene("learn_c2f", 192, 128, 8, 4);
+  TupleConfig dcfg;
+  dcfg.views_in = 3;
+  dcfg.views_loss = 4;
+  dcfg.width = 192;
+  dcfg.height = 128;
+  dcfg.max_zoom = 1.0;
+  dcfg.jitter = 0.0;
+  MvsFolderSource source({dir}, dcfg);
+  std::vector<TrainingTuple> eval_tuples;
+  for (size_t i = 0; i < source.size(); ++i) eval_tuples.push_back(source.tuple(i, nullptr));
+  torch::manual_seed(0);
+  MvsNetConfig mcfg;
+  mcfg.num_depth = 16;
+  TrainerConfig tcfg;
+  tcfg.num_depth = 16;
+  tcfg.loss.top_k = 2;
+  tcfg.fine.planes = 8;
+  tcfg.fine.resolution_divisor = 2;
+  tcfg.fine.first_pass_downscale = 2;
+  Trainer trainer(MvsNet(mcfg), torch::kCPU, tcfg);
+  const auto before = trainer.evaluate(eval_tuples);
+  TupleSampler sampler(source, 1);
+  const int steps = 100;
+  double first_loss = 0, last_loss = 0;
+  for (int s = 0; s < steps; ++s) {
+    const auto v = trainer.step({sampler.next(false)});
+    ASSERT_TRUE(std::isfinite(v.total)) << "step " << s;
+    if (s < 16) first_loss += v.total / 16;
+    if (s >= steps - 16) last_loss += v.total / 16;
+  }
+  const auto after = trainer.evaluate(eval_tuples);
+  std::cout << "coarse to fine: training loss " << first_loss << " -> " << last_loss << "; depth |err| "
+            << before.depth.mean_abs << " -> " << after.depth.mean_abs << " m\n";
+  ASSERT_GT(after.depth.pixels, 4 * 1000);  // on the 96x64 grid of the map
+  EXPECT_LT(last_loss, 0.8 * first_loss);
+  EXPECT_LT(after.depth.mean_abs, 0.6 * before.depth.mean_abs);
+  // Refused with the volume terms, which read a probability volume over the first pass's planes.
+  TrainerConfig bad = tcfg;
+  bad.entropy_weight = 0.01;
+  EXPECT_THROW(bad.validate(), std::invalid_argument);
 }
 
 // The probability volumes of the shipped model after 12 steps of fine-tuning on a small rendered

@@ -47,14 +47,23 @@ void TrainingTuple::validate() const {
   if (supervised && !depth_gt.defined()) bad("supervised training needs ground-truth depth, and there is none");
 }
 
-torch::Tensor downsample_to_depth_grid(const torch::Tensor& image) {
-  return F::avg_pool2d(image, F::AvgPool2dFuncOptions(5).stride(4).padding(2).count_include_pad(false));
+torch::Tensor downsample_to_depth_grid(const torch::Tensor& image, int map_divisor) {
+  if (map_divisor != 2 && map_divisor != 4) {
+    throw std::invalid_argument("depth grid: map divisor must be 2 or 4, got " + std::to_string(map_divisor));
+  }
+  const int64_t size = map_divisor + 1;  // odd, centred on the grid's pixel
+  return F::avg_pool2d(image,
+                       F::AvgPool2dFuncOptions(size).stride(map_divisor).padding(map_divisor / 2).count_include_pad(false));
 }
 
 TrainingBatch make_training_batch(const std::vector<TrainingTuple>& tuples, int num_depth, DepthSampling sampling,
-                                  const torch::Device& device) {
+                                  const torch::Device& device, int map_divisor) {
   if (tuples.empty()) throw std::invalid_argument("make_training_batch: empty batch");
-  std::vector<torch::Tensor> images, proj, depth_values, loss_ref, loss_src, K_ref, K_src, T, gt;
+  if (map_divisor != 2 && map_divisor != 4) {
+    throw std::invalid_argument("make_training_batch: map divisor must be 2 or 4, got " + std::to_string(map_divisor));
+  }
+  const double map_scale = 1.0 / map_divisor;
+  std::vector<torch::Tensor> images, proj, proj_map, depth_values, loss_ref, loss_src, K_ref, K_src, T, gt;
   std::vector<bool> b_supervised;
   bool any_gt = false;
   for (const auto& t : tuples) {
@@ -73,15 +82,16 @@ TrainingBatch make_training_batch(const std::vector<TrainingTuple>& tuples, int 
     }
     images.push_back(torch::stack(imgs));
     proj.push_back(mvsnet_projection_matrices(cams));
+    proj_map.push_back(mvsnet_projection_matrices(cams, map_scale));
     depth_values.push_back(depth_hypotheses(t.depth_min, t.depth_max, num_depth, sampling));
 
-    const Camera ref_cam = depth_map_camera(t.network_views[0].camera);
-    loss_ref.push_back(downsample_to_depth_grid(imgs[0].unsqueeze(0)).squeeze(0));
+    const Camera ref_cam = depth_map_camera(t.network_views[0].camera, map_scale);
+    loss_ref.push_back(downsample_to_depth_grid(imgs[0].unsqueeze(0), map_divisor).squeeze(0));
     K_ref.push_back(intrinsics_tensor(ref_cam));
     std::vector<torch::Tensor> srcs, ks, ts;
     for (const auto& v : t.loss_views) {
-      srcs.push_back(downsample_to_depth_grid(rgb8_to_float(v.image).unsqueeze(0)).squeeze(0));
-      const Camera c = depth_map_camera(v.camera);
+      srcs.push_back(downsample_to_depth_grid(rgb8_to_float(v.image).unsqueeze(0), map_divisor).squeeze(0));
+      const Camera c = depth_map_camera(v.camera, map_scale);
       ks.push_back(intrinsics_tensor(c));
       ts.push_back(relative_pose_tensor(ref_cam, c));
     }
@@ -92,7 +102,10 @@ TrainingBatch make_training_batch(const std::vector<TrainingTuple>& tuples, int 
     b_supervised.push_back(t.supervised);
     if (t.depth_gt.defined()) {
       any_gt = true;
-      gt.push_back(t.depth_gt.to(torch::kFloat32).slice(0, 0, H * 4, 4).slice(1, 0, W * 4, 4).contiguous());
+      gt.push_back(t.depth_gt.to(torch::kFloat32)
+                       .slice(0, 0, H * map_divisor, map_divisor)
+                       .slice(1, 0, W * map_divisor, map_divisor)
+                       .contiguous());
     } else {
       gt.push_back(torch::zeros({H, W}));
     }
@@ -100,6 +113,7 @@ TrainingBatch make_training_batch(const std::vector<TrainingTuple>& tuples, int 
   TrainingBatch b;
   b.images = torch::stack(images).to(device);
   b.proj = torch::stack(proj).to(device);
+  b.proj_map = torch::stack(proj_map).to(device);
   b.depth_values = torch::stack(depth_values).to(device);
   b.loss_ref = torch::stack(loss_ref).to(device);
   b.loss_src = torch::stack(loss_src).to(device);
@@ -156,6 +170,13 @@ void TrainerConfig::validate() const {
     throw std::invalid_argument("plane loss weight must be finite and >= 0");
   }
   if (micro_batch < 0) throw std::invalid_argument("micro batch must be >= 0 (0 = the whole batch), got " + std::to_string(micro_batch));
+  fine.validate();
+  if (fine.enabled() && (entropy_weight > 0 || plane_loss_weight > 0)) {
+    throw std::invalid_argument("coarse-to-fine training takes neither the entropy nor the plane loss (weights 0)");
+  }
+  if (!(first_pass_loss_weight >= 0) || !std::isfinite(first_pass_loss_weight)) {
+    throw std::invalid_argument("first pass loss weight must be finite and >= 0");
+  }
 }
 
 void LossValues::add(const LossTerms& t) {
@@ -254,10 +275,30 @@ LossValues Trainer::step(const std::vector<TrainingTuple>& tuples) {
   return values;
 }
 
+MvsOutput training_forward(MvsNetImpl& model, const TrainingBatch& b, const TrainerConfig& config,
+                           bool keep_prob_volume) {
+  if (!config.fine.enabled()) return model.forward(b.images, b.proj, b.depth_values, keep_prob_volume);
+  return coarse_to_fine_forward(model, b.images, b.proj, b.depth_values, config.fine, b.proj_map);
+}
+
+torch::Tensor on_map_grid(const torch::Tensor& depth, int64_t map_height) {
+  auto map = depth;
+  while (map.size(1) < map_height) map = upsample2_naive(map.unsqueeze(1)).squeeze(1);
+  TORCH_CHECK(map.size(1) == map_height, "on_map_grid: a ", depth.size(1), "-row depth does not double to ", map_height,
+              " rows");
+  return map;
+}
+
 LossValues Trainer::forward_backward(const std::vector<TrainingTuple>& tuples, double weight) {
-  const auto b = make_training_batch(tuples, config_.num_depth, model_->config().depth_sampling, device_);
+  const auto b = make_training_batch(tuples, config_.num_depth, model_->config().depth_sampling, device_,
+                                     config_.map_divisor());
   const bool entropy_term = config_.entropy_weight > 0, plane_term = config_.plane_loss_weight > 0;
-  const auto out = model_->forward(b.images, b.proj, b.depth_values, /*keep_prob_volume=*/entropy_term || plane_term);
+  const auto out = training_forward(*model_, b, config_, /*keep_prob_volume=*/entropy_term || plane_term);
+  // The depths that learn: the map, and with a fine pass also the first pass's (on the map's grid).
+  std::vector<std::pair<torch::Tensor, double>> depths = {{out.depth, 1.0}};
+  if (config_.fine.enabled() && config_.first_pass_loss_weight > 0) {
+    depths.emplace_back(on_map_grid(out.depth_init, out.depth.size(1)), config_.first_pass_loss_weight);
+  }
   // Which tuples learn from ground truth and which from photometric consistency.
   std::vector<int64_t> supervised_rows, photometric_rows;
   for (size_t i = 0; i < b.supervised.size(); ++i) {
@@ -268,13 +309,17 @@ LossValues Trainer::forward_backward(const std::vector<TrainingTuple>& tuples, d
     return r.size() == b.supervised.size() ? t : t.index_select(0, torch::tensor(r, torch::kLong).to(t.device()));
   };
   torch::Tensor total = torch::zeros({}, out.depth.options());
-  LossValues values;
+  LossValues values;  // the terms of the map's depth
   if (!photometric_rows.empty()) {
     const auto& r = photometric_rows;
-    const auto terms = unsupervised_loss(rows(b.loss_ref, r), rows(b.loss_src, r), rows(b.K_ref, r), rows(b.K_src, r),
-                                         rows(b.T_src_ref, r), rows(out.depth, r), config_.loss);
-    values.add(terms);
-    auto photometric_total = terms.total;
+    torch::Tensor photometric_total = torch::zeros({}, out.depth.options());
+    for (size_t i = 0; i < depths.size(); ++i) {
+      const auto& [depth, depth_weight] = depths[i];
+      const auto terms = unsupervised_loss(rows(b.loss_ref, r), rows(b.loss_src, r), rows(b.K_ref, r),
+                                           rows(b.K_src, r), rows(b.T_src_ref, r), rows(depth, r), config_.loss);
+      if (i == 0) values.add(terms);
+      photometric_total = photometric_total + depth_weight * terms.total;
+    }
     if (entropy_term) {
       const auto entropy = normalized_plane_entropy(rows(out.prob_volume, r)).mean();
       values.entropy = entropy.item<double>();
@@ -292,10 +337,13 @@ LossValues Trainer::forward_backward(const std::vector<TrainingTuple>& tuples, d
   }
   if (!supervised_rows.empty()) {
     const auto& r = supervised_rows;
-    const auto supervised = supervised_depth_loss(rows(out.depth, r), rows(b.depth_gt, r), rows(b.depth_values, r),
-                                                  model_->config().depth_sampling);
-    values.supervised = supervised.item<double>();
-    total = total + supervised * (config_.supervised_weight * r.size() / batch_size);
+    for (size_t i = 0; i < depths.size(); ++i) {
+      const auto& [depth, depth_weight] = depths[i];
+      const auto supervised = supervised_depth_loss(rows(depth, r), rows(b.depth_gt, r), rows(b.depth_values, r),
+                                                    model_->config().depth_sampling);
+      if (i == 0) values.supervised = supervised.item<double>();
+      total = total + supervised * (depth_weight * config_.supervised_weight * r.size() / batch_size);
+    }
   }
   values.total = total.item<double>();
   values.count = 1;
@@ -313,8 +361,9 @@ Evaluation evaluate_model(MvsNet& model, const std::vector<TrainingTuple>& tuple
   LossValues sum;
   std::vector<torch::Tensor> est, gt;
   for (const auto& t : tuples) {
-    const auto b = make_training_batch({t}, config.num_depth, model->config().depth_sampling, device);
-    const auto out = model->forward(b.images, b.proj, b.depth_values);
+    const auto b = make_training_batch({t}, config.num_depth, model->config().depth_sampling, device,
+                                       config.map_divisor());
+    const auto out = training_forward(*model, b, config, /*keep_prob_volume=*/false);
     sum.add(unsupervised_loss(b.loss_ref, b.loss_src, b.K_ref, b.K_src, b.T_src_ref, out.depth, config.loss));
     if (b.depth_gt.defined()) {
       est.push_back(out.depth.flatten().cpu());

@@ -5,7 +5,9 @@
 // Where the loss is computed: on the network's depth grid (1/4 of the input), where depth pixel
 // (i, j) sits on input pixel (4i, 4j) (depth_map_camera). Every loss image is box-filtered over
 // 5x5 input pixels centred on (4i, 4j) and sampled there, so images, depth and intrinsics agree
-// exactly; this keeps the loss as cheap as the network's output (see docs/training.md).
+// exactly; this keeps the loss as cheap as the network's output (see docs/training.md). A
+// coarse-to-fine run (TrainerConfig::fine) at 1/2 takes the loss on that grid: pixel (i, j) on
+// input pixel (2i, 2j), images box-filtered over 3x3.
 #pragma once
 
 #include <torch/nn/module.h>
@@ -17,6 +19,7 @@
 #include <vector>
 
 #include "unsup_mvs/core/depth_estimator.h"
+#include "unsup_mvs/core/fine_pass.h"
 #include "unsup_mvs/core/fusion.h"
 #include "unsup_mvs/core/losses.h"
 #include "unsup_mvs/core/mvsnet.h"
@@ -43,8 +46,9 @@ struct TrainingTuple {
 struct TrainingBatch {
   torch::Tensor images;        // [B,N,3,H,W] in [0,1]
   torch::Tensor proj;          // [B,N,4,4] mvsnet_projection_matrices
+  torch::Tensor proj_map;      // [B,N,4,4] the same on the depth grid (scale 1/map_divisor)
   torch::Tensor depth_values;  // [B,D]
-  torch::Tensor loss_ref;      // [B,3,h,w] reference on the depth grid (h = H/4)
+  torch::Tensor loss_ref;      // [B,3,h,w] reference on the depth grid (h = H/4, or H/2: map_divisor)
   torch::Tensor loss_src;      // [B,M,3,h,w]
   torch::Tensor K_ref;         // [B,3,3] depth-grid intrinsics
   torch::Tensor K_src;         // [B,M,3,3]
@@ -52,12 +56,14 @@ struct TrainingBatch {
   torch::Tensor depth_gt;      // [B,h,w] (0 = unknown) or undefined when no tuple has GT
   std::vector<bool> supervised;  // [B]: the tuple is trained on depth_gt (TrainingTuple::supervised)
 };
+// map_divisor: the depth grid's, 4 (the network's) or 2 (a fine pass at half the input's size).
 TrainingBatch make_training_batch(const std::vector<TrainingTuple>& tuples, int num_depth, DepthSampling sampling,
-                                  const torch::Device& device);
+                                  const torch::Device& device, int map_divisor = 4);
 
 // Box filter over the 5x5 input pixels centred on (4i, 4j), sampled there: the image on the
-// network's depth grid.  [B,C,H,W] -> [B,C,H/4,W/4]
-torch::Tensor downsample_to_depth_grid(const torch::Tensor& image);
+// network's depth grid.  [B,C,H,W] -> [B,C,H/4,W/4]; with map_divisor 2, over the 3x3 centred on
+// (2i, 2j)  -> [B,C,H/2,W/2]
+torch::Tensor downsample_to_depth_grid(const torch::Tensor& image, int map_divisor = 4);
 
 // Depth errors on the pixels with ground truth (> 0), via evaluate_depth (metrics.h).  est, gt [B,h,w]
 struct DepthErrors {
@@ -102,6 +108,12 @@ struct TrainerConfig {
   // How the model's depth maps are made outside the loss: self-training labels and anchors, and
   // the judge's multi-view consistency (`umvs infer --source-combination`).
   SourceCombination sources = SourceCombination::kVariance;
+  // Coarse to fine (fine_pass.h): the network runs both passes (coarse_to_fine_forward) and learns
+  // from the loss of each, the first pass's depth brought to the map's grid and weighed by
+  // first_pass_loss_weight. Off (planes 0): one pass, as the paper.
+  FinePassConfig fine;
+  double first_pass_loss_weight = 0.5;
+  int map_divisor() const { return fine.enabled() ? fine.resolution_divisor : 4; }  // the loss's grid
   void validate() const;
 };
 
@@ -165,6 +177,15 @@ class Trainer {
   std::unique_ptr<torch::optim::Adam> optimizer_;
   GradientSync gradient_sync_;
 };
+
+// The model's depth on a batch made with config.map_divisor(): one pass (MvsNetImpl::forward), or
+// both passes of a coarse-to-fine run (coarse_to_fine_forward), with gradients unless disabled.
+MvsOutput training_forward(MvsNetImpl& model, const TrainingBatch& batch, const TrainerConfig& config,
+                           bool keep_prob_volume);
+
+// A first pass's depth [B,h,w] on the map's grid of `map_height` rows (naive 2x steps,
+// upsample2_naive, differentiable); throws c10::Error when the rows do not double to it.
+torch::Tensor on_map_grid(const torch::Tensor& depth, int64_t map_height);
 
 // The loss of `model` on `tuples` (eval mode, no gradients): the held-out photometric loss a
 // service compares between a new and the served model, and GT depth errors where available.
