@@ -143,7 +143,8 @@ TEST(TrainRunConfig, UpgradeGivesLeftOutOptionsTheValuesOlderVersionsRanWith) {
   EXPECT_EQ(up.at("seed"), "x") << "text that is no number stays text (and differs, so a resume names it)";
   EXPECT_FALSE(up.contains("rank"));
   const RunOptions left_out = {{"source-combination", "variance"}, {"entropy-weight", 0.0}, {"plane-loss-weight", 0.0},
-                               {"batchnorm", "train"}, {"min-zoom", 1.0}, {"max-zoom", 1.25}, {"world-size", 1}};
+                               {"batchnorm", "train"}, {"min-zoom", 1.0}, {"max-zoom", 1.25}, {"world-size", 1},
+                               {"fine-planes", 0}, {"fine-resolution", 4}, {"first-pass-downscale", 1}};
   for (const auto& entry : left_out.items()) EXPECT_EQ(up.at(entry.key()), entry.value()) << entry.key();
   // A plain run recorded anchoring as "".
   old.options = {{"anchor-unconfirmed", ""}};
@@ -152,6 +153,12 @@ TEST(TrainRunConfig, UpgradeGivesLeftOutOptionsTheValuesOlderVersionsRanWith) {
   RunRecord today;
   today.options = train_run_options(TrainOptions{}, DistributedConfig{});
   EXPECT_EQ(run_options_difference(upgrade_train_record(today), today.options, {}), "");
+  // A record of this version made before coarse-to-fine training resumes as the one-pass run it was.
+  RunRecord one_pass = today;
+  for (const char* name : {"fine-planes", "fine-span", "fine-resolution", "first-pass-downscale", "first-pass-loss-weight"}) {
+    one_pass.options.erase(name);
+  }
+  EXPECT_EQ(run_options_difference(upgrade_train_record(one_pass), today.options, {}), "");
   today.version = kRunRecordVersion + 1;
   EXPECT_THROW(upgrade_train_record(today), std::runtime_error);
 }

@@ -43,6 +43,11 @@ TrainerConfig trainer_config(const TrainOptions& o, int num_depth) {
   }
   t.freeze_batchnorm = o.batchnorm == "frozen";
   t.sources = source_combination_from_string(o.source_combination);
+  t.fine.planes = o.fine_planes;
+  t.fine.span = o.fine_span;
+  t.fine.resolution_divisor = o.fine_resolution;
+  t.fine.first_pass_downscale = o.first_pass_downscale;
+  t.first_pass_loss_weight = o.first_pass_loss_weight;
   return t;
 }
 
@@ -154,6 +159,10 @@ void TrainOptions::validate() const {
   }
   const TupleConfig tuples = tuple_config(*this, trainer.num_depth);
   tuples.validate();
+  if (trainer.fine.enabled() && trainer.fine.first_pass_downscale == 2 && (width % 64 != 0 || height % 64 != 0)) {
+    throw std::invalid_argument("--first-pass-downscale 2 halves the training images: --width and --height must be "
+                                "multiples of 64, got " + std::to_string(width) + "x" + std::to_string(height));
+  }
   if (trainer.loss.top_k > tuples.views_loss) {
     throw std::invalid_argument("--top-k " + std::to_string(trainer.loss.top_k) + " exceeds --views-loss " +
                                 std::to_string(tuples.views_loss));

@@ -68,6 +68,11 @@ void visit_options(const TrainOptions& o, Visit&& visit) {
   visit("width", o.width);
   visit("height", o.height);
   visit("num-depth", o.num_depth);
+  visit("fine-planes", o.fine_planes);
+  visit("fine-span", o.fine_span);
+  visit("fine-resolution", o.fine_resolution);
+  visit("first-pass-downscale", o.first_pass_downscale);
+  visit("first-pass-loss-weight", o.first_pass_loss_weight);
   visit("depth-sampling", o.depth_sampling);
   visit("feature-warp", o.feature_warp);
   visit("steps", o.steps);
@@ -153,8 +158,27 @@ RunOptions train_run_options(const TrainOptions& o, const DistributedConfig& dis
   return options;
 }
 
+namespace {
+
+// Options newer than every record version: the runs recorded without them had these values.
+RunOptions with_later_options(RunOptions options) {
+  static const RunOptions later = {
+      {"fine-planes", 0},  // one pass: coarse-to-fine training came later
+      {"fine-span", 4.0},
+      {"fine-resolution", 4},
+      {"first-pass-downscale", 1},
+      {"first-pass-loss-weight", 0.5},
+  };
+  for (const auto& entry : later.items()) {
+    if (!options.contains(entry.key())) options[entry.key()] = entry.value();
+  }
+  return options;
+}
+
+}  // namespace
+
 RunOptions upgrade_train_record(const RunRecord& record) {
-  if (record.version == kRunRecordVersion) return record.options;
+  if (record.version == kRunRecordVersion) return with_later_options(record.options);
   if (record.version != 1) {
     throw std::runtime_error("run configuration '" + record.path + "' has version " + std::to_string(record.version) +
                              ", which this umvs does not know");
@@ -185,7 +209,7 @@ RunOptions upgrade_train_record(const RunRecord& record) {
   for (const auto& entry : omitted.items()) {
     if (!options.contains(entry.key())) options[entry.key()] = entry.value();
   }
-  return options;
+  return with_later_options(options);
 }
 
 std::optional<RunOptions> recorded_train_options(const std::string& out) {

@@ -147,6 +147,17 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
       .bind("num-depth", &o.num_depth,
             "depth hypotheses (multiple of 8; 0 = 128 at 640 wide, scaled with --width, as umvs infer and the "
             "shipped model's training; a --resume without it keeps the run's)")
+      .bind("fine-planes", &o.fine_planes,
+            "coarse to fine: a second pass of the network over this many per-pixel hypotheses around the first "
+            "pass's depth, a loss on each pass (multiple of 8; 0 = one pass; infer with the same --fine-* options)")
+      .bind("fine-span", &o.fine_span, "coarse to fine: first-pass plane intervals the fine hypotheses cover")
+      .bind("fine-resolution", &o.fine_resolution,
+            "coarse to fine: the map at 1/N of the input, 4 or 2 (the loss on that grid)")
+      .bind("first-pass-downscale", &o.first_pass_downscale,
+            "coarse to fine: 2 = the first pass on the images at half size (a quarter of its work; --width and "
+            "--height multiples of 64), 1 = as given")
+      .bind("first-pass-loss-weight", &o.first_pass_loss_weight,
+            "coarse to fine: weight of the first pass's loss (its depth on the map's grid) against the map's")
       .bind("depth-sampling", &o.depth_sampling, "depth | inverse_depth (new models only)")
       .bind("feature-warp", &o.feature_warp,
             "exact | mvsnet_pytorch: where the cost volume samples the source views (default: the --init "

@@ -51,6 +51,9 @@ struct TrainOptions {
   std::string input_normalization = "per_image_channel";
   int views_in = 3, views_loss = 6, top_k = 3, width = 640, height = 512;
   int num_depth = 0;  // 0: the run's own on --resume, else the default for --width
+  // Coarse to fine (TrainerConfig::fine): fine planes 0 = one pass.
+  int fine_planes = 0, fine_resolution = 4, first_pass_downscale = 1;
+  double fine_span = 4, first_pass_loss_weight = 0.5;
   std::string depth_sampling = "depth", feature_warp;
   // The optimisation.
   int steps = 10000, batch = 1, micro_batch = 0;
