@@ -128,6 +128,35 @@ TEST(CliJson, BenchPrintsOneJsonObjectThatParses) {
   for (const char* stage : {"ranking", "consistency", "points"}) EXPECT_GE(j.at("stages_median_s_per_view").at(stage), 0.0);
 }
 
+// --against times the old one-pass network beside the candidate in the same run.
+TEST(CliJson, BenchPipelineAgainstTimesTheOnePassNetworkToo) {
+  const std::string model = std::string(UMVS_SOURCE_DIR) + "/models/unsup_mvsnet.pt";
+  const std::string common = "bench --case pipeline --checkpoint " + model + " --against " + model +
+                             " --fine-planes 8 --first-pass-downscale 2 --fine-resolution 2 --width 256 --height 192"
+                             " --runs 1 --warmup 0";
+  const Result r = run_umvs(common + " --json", kOnlyStdout);
+  ASSERT_EQ(r.status, 0) << r.output;
+  const auto j = nlohmann::json::parse(r.output);
+  EXPECT_EQ(j.at("case"), "pipeline");
+  ASSERT_TRUE(j.contains("against")) << j;
+  const auto& against = j.at("against");
+  EXPECT_FALSE(against.contains("case") || against.contains("threads") || against.contains("peak_rss_mib")) << against;
+  // The fine pass at 1/2 of the input, the one pass at 1/4.
+  EXPECT_EQ(j.at("depth_map_width").get<int>(), 2 * against.at("depth_map_width").get<int>()) << j;
+  EXPECT_GT(j.at("total_s").at("p90").get<double>(), 0.0);
+  EXPECT_GT(against.at("total_s").at("p90").get<double>(), 0.0);
+  EXPECT_EQ(against.at("runs"), 1);
+
+  const Result text = run_umvs(common, kOnlyStdout);
+  ASSERT_EQ(text.status, 0) << text.output;
+  EXPECT_TRUE(contains(text.output, "against (one pass, " + model + ")")) << text.output;
+  EXPECT_TRUE(contains(text.output, "image to depth map p90: candidate ")) << text.output;
+
+  const Result wrong_case = run_umvs("bench --case network --against " + model + " --runs 1", kOnlyStderr);
+  EXPECT_EQ(wrong_case.status, 2) << wrong_case.output;
+  EXPECT_TRUE(contains(wrong_case.output, "--against")) << wrong_case.output;
+}
+
 TEST(CliJson, EvalDepthPrintsNullForMetricsWithoutPixels) {
   const std::string gt = test::scene("cli_json_gt");
   const std::string est = test::temp_dir("cli_json_est");

@@ -7,6 +7,7 @@
 #include <fstream>
 #include <iomanip>
 #include <iostream>
+#include <memory>
 #include <sstream>
 #include <thread>
 
@@ -151,11 +152,71 @@ int bench_fusion(const Args& args, const torch::Device& device) {
 }
 
 
+// The timings of one estimator over the runs of --case pipeline.
+struct PipelineTimes {
+  std::vector<double> total, network, first_pass, completion, features, volume, unet, fine_pass;
+  int extra_passes = 0, width = 0, height = 0;
+};
+
+// One estimate, recorded in `t` unless it is a warmup run.
+void time_estimate(DepthEstimator& estimator, const std::vector<ViewInput>& views, const SynthScene& scene, bool record,
+                   PipelineTimes& t) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const DepthMap map = estimator.estimate(views, scene.depth_min, scene.depth_max);
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  if (!record) return;
+  t.total.push_back(seconds);
+  t.network.push_back(map.seconds);
+  t.completion.push_back(map.completion_seconds);
+  const MvsStageTimes& st = map.stages;
+  t.first_pass.push_back(st.features + st.cost_volume + st.regularization + st.regression + st.refinement);
+  t.features.push_back(st.features);
+  t.volume.push_back(st.cost_volume);
+  t.unet.push_back(st.regularization);
+  t.fine_pass.push_back(st.fine_cost_volume + st.fine_regularization);
+  t.extra_passes += map.per_source_passes ? 1 : 0;
+  t.width = map.camera.width;
+  t.height = map.camera.height;
+}
+
+std::pair<double, double> p50_p90(const std::vector<double>& v) { return {percentile(v, 50), percentile(v, 90)}; }
+
+// One estimator's keys of the JSON object (all but case, threads, device and peak_rss_mib).
+nlohmann::ordered_json pipeline_json(const PipelineTimes& t, int W, int H, int num_depth, int V) {
+  auto pair = [](const std::vector<double>& v) { return nlohmann::ordered_json{{"p50", p50_p90(v).first}, {"p90", p50_p90(v).second}}; };
+  return {{"width", W}, {"height", H}, {"num_depth", num_depth}, {"views", V},
+          {"depth_map_width", t.width}, {"depth_map_height", t.height},
+          {"runs", static_cast<int>(t.total.size())}, {"runs_with_per_source_passes", t.extra_passes},
+          {"total_s", pair(t.total)}, {"network_all_passes_s", pair(t.network)}, {"first_pass_s", pair(t.first_pass)},
+          {"completion_s", pair(t.completion)},
+          {"first_pass_stages_p50_s", {{"features", p50_p90(t.features).first}, {"cost_volume", p50_p90(t.volume).first},
+                                       {"unet3d", p50_p90(t.unet).first}}}};
+}
+
+// One estimator's text block: `header`, then p50/p90 of the estimate and each stage.
+void print_pipeline_block(const std::string& header, const PipelineTimes& t, bool fine) {
+  auto line = [](const char* name, const std::vector<double>& v) {
+    std::cout << "  " << std::left << std::setw(34) << name << std::right << std::setprecision(3) << "p50 "
+              << p50_p90(v).first << " s, p90 " << p50_p90(v).second << " s\n";
+  };
+  std::cout << header;
+  line("image to depth map (estimate)", t.total);
+  line("network, every pass", t.network);
+  line("network, first pass", t.first_pass);
+  line("  features", t.features);
+  line("  cost volume", t.volume);
+  line("  3-D U-Net", t.unet);
+  if (fine) line("  of which the fine pass", t.fine_pass);
+  line("completion", t.completion);
+}
+
 // Pipeline case: what the inference nodelet does per keyframe set with its default settings
 // (recommended_estimator_config: at most 640x512, planes following the input, `auto` sources,
 // completion), on a rendered room (the demo's scene) so that the confidence, and with it `auto`'s
 // extra passes, is what real input gives. Each run takes the next view as the reference with its
-// best views-1 neighbours; reports p50/p90 of the whole estimate and of each stage.
+// best views-1 neighbours; reports p50/p90 of the whole estimate and of each stage. --against
+// times a second checkpoint in the nodelet's one-pass configuration on the same views,
+// interleaved run by run.
 int bench_pipeline(const Args& args, const torch::Device& device) {
   if (args.str("checkpoint").empty()) {
     throw std::invalid_argument("--case pipeline times a trained model's behaviour (its confidence decides the extra "
@@ -172,16 +233,26 @@ int bench_pipeline(const Args& args, const torch::Device& device) {
   scene_cfg.height = H;
   scene_cfg.gt_cloud_samples = 0;
   const SynthScene scene = render_synthetic_scene(scene_cfg);
+  const auto default_planes = [&](const DepthEstimatorConfig& c) {
+    return default_plane_count(first_pass_size(c, plan_network_resize(W, H, c.max_width, c.max_height).width));
+  };
   DepthEstimatorConfig cfg = recommended_estimator_config();
   if (args.given("fine-planes")) cfg.fine.planes = args.integer("fine-planes");
   if (args.given("fine-span")) cfg.fine.span = args.real("fine-span");
   if (args.given("fine-resolution")) cfg.fine.resolution_divisor = args.integer("fine-resolution");
   if (args.given("first-pass-downscale")) cfg.fine.first_pass_downscale = args.integer("first-pass-downscale");
-  if (args.given("num-depth")) cfg.num_depth = args.integer("num-depth");
-  else cfg.num_depth = default_plane_count(first_pass_size(cfg, plan_network_resize(W, H, cfg.max_width, cfg.max_height).width));
+  cfg.num_depth = args.given("num-depth") ? args.integer("num-depth") : default_planes(cfg);
   DepthEstimator estimator(load_model(args.str("checkpoint"), device).model, device, cfg);
-  std::vector<double> total, network, first_pass, completion, features, volume, unet, fine_pass;
-  int extra_passes = 0, width = 0, height = 0;
+  // The nodelet's plain one pass: no fine pass, planes by the default rule.
+  const std::string against_path = args.str("against");
+  std::unique_ptr<DepthEstimator> against;
+  if (!against_path.empty()) {
+    DepthEstimatorConfig against_cfg = recommended_estimator_config();
+    against_cfg.fine = FinePassConfig{};
+    against_cfg.num_depth = default_planes(against_cfg);
+    against = std::make_unique<DepthEstimator>(load_model(against_path, device).model, device, against_cfg);
+  }
+  PipelineTimes times, against_times;
   for (int r = 0; r < warmup + runs; ++r) {
     const size_t ref = static_cast<size_t>(r) % scene.views.size();
     std::vector<ViewInput> views{{scene.views[ref].image, scene.views[ref].camera}};
@@ -189,56 +260,38 @@ int bench_pipeline(const Args& args, const torch::Device& device) {
       if (static_cast<int>(views.size()) == V) break;
       views.push_back({scene.views[source].image, scene.views[source].camera});
     }
-    const auto t0 = std::chrono::steady_clock::now();
-    const DepthMap map = estimator.estimate(views, scene.depth_min, scene.depth_max);
-    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    if (r < warmup) continue;
-    total.push_back(seconds);
-    network.push_back(map.seconds);
-    completion.push_back(map.completion_seconds);
-    const MvsStageTimes& st = map.stages;
-    first_pass.push_back(st.features + st.cost_volume + st.regularization + st.regression + st.refinement);
-    features.push_back(st.features);
-    volume.push_back(st.cost_volume);
-    unet.push_back(st.regularization);
-    fine_pass.push_back(st.fine_cost_volume + st.fine_regularization);
-    extra_passes += map.per_source_passes ? 1 : 0;
-    width = map.camera.width;
-    height = map.camera.height;
+    time_estimate(estimator, views, scene, r >= warmup, times);
+    if (against) time_estimate(*against, views, scene, r >= warmup, against_times);
   }
   std::ostringstream device_name;
   device_name << device;
-  const auto p = [](const std::vector<double>& v) { return std::make_pair(percentile(v, 50), percentile(v, 90)); };
   const int num_depth = estimator.num_depth();
   if (args.on("json")) {
-    auto pair = [&](const std::vector<double>& v) { return nlohmann::ordered_json{{"p50", p(v).first}, {"p90", p(v).second}}; };
-    const nlohmann::ordered_json out = {
-        {"case", "pipeline"}, {"width", W}, {"height", H}, {"num_depth", num_depth}, {"views", V},
-        {"depth_map_width", width}, {"depth_map_height", height}, {"threads", torch::get_num_threads()},
-        {"device", device_name.str()}, {"runs", runs}, {"runs_with_per_source_passes", extra_passes},
-        {"total_s", pair(total)}, {"network_all_passes_s", pair(network)}, {"first_pass_s", pair(first_pass)},
-        {"completion_s", pair(completion)},
-        {"first_pass_stages_p50_s", {{"features", p(features).first}, {"cost_volume", p(volume).first},
-                                     {"unet3d", p(unet).first}}},
-        {"peak_rss_mib", peak_rss_mib()}};
+    nlohmann::ordered_json out = {{"case", "pipeline"}};
+    out.update(pipeline_json(times, W, H, num_depth, V));
+    out["threads"] = torch::get_num_threads();
+    out["device"] = device_name.str();
+    out["peak_rss_mib"] = peak_rss_mib();
+    if (against) out["against"] = pipeline_json(against_times, W, H, against->num_depth(), V);
     std::cout << out.dump() << "\n";
   } else {
-    auto line = [&](const char* name, const std::vector<double>& v) {
-      std::cout << "  " << std::left << std::setw(34) << name << std::right << std::setprecision(3) << "p50 " << p(v).first
-                << " s, p90 " << p(v).second << " s\n";
-    };
-    std::cout << std::fixed << "pipeline (the inference nodelet's defaults) " << W << "x" << H << " images, D=" << num_depth
-              << ", " << V << " views, device=" << device_name.str() << " threads=" << torch::get_num_threads() << ": "
-              << width << "x" << height << " depth maps, " << runs << " runs (" << extra_passes
-              << " with the per-source passes of auto), peak RSS " << std::setprecision(0) << peak_rss_mib() << " MiB\n";
-    line("image to depth map (estimate)", total);
-    line("network, every pass", network);
-    line("network, first pass", first_pass);
-    line("  features", features);
-    line("  cost volume", volume);
-    line("  3-D U-Net", unet);
-    if (cfg.fine.enabled()) line("  of which the fine pass", fine_pass);
-    line("completion", completion);
+    std::ostringstream header;
+    header << std::fixed << "pipeline (the inference nodelet's defaults) " << W << "x" << H << " images, D=" << num_depth
+           << ", " << V << " views, device=" << device_name.str() << " threads=" << torch::get_num_threads() << ": "
+           << times.width << "x" << times.height << " depth maps, " << runs << " runs (" << times.extra_passes
+           << " with the per-source passes of auto), peak RSS " << std::setprecision(0) << peak_rss_mib() << " MiB\n";
+    std::cout << std::fixed;
+    print_pipeline_block(header.str(), times, cfg.fine.enabled());
+    if (against) {
+      std::ostringstream against_header;
+      against_header << "against (one pass, " << against_path << "): D=" << against->num_depth() << ", "
+                     << against_times.width << "x" << against_times.height << " depth maps, " << runs << " runs ("
+                     << against_times.extra_passes << " with the per-source passes of auto)\n";
+      print_pipeline_block(against_header.str(), against_times, false);
+      const double c = p50_p90(times.total).second, a = p50_p90(against_times.total).second;
+      std::cout << std::setprecision(3) << "image to depth map p90: candidate " << c << " s, against " << a
+                << " s (against / candidate = " << std::setprecision(2) << a / c << "x)\n";
+    }
   }
   return 0;
 }
@@ -273,6 +326,9 @@ UMVS_COMMAND(bench, "time and memory of the network on synthetic input") {
       .option("runs", "5", "timed runs (>= 5 recommended)")
       .option("warmup", "1", "untimed runs first")
       .option("checkpoint", "", "time these weights (default random init)")
+      .option("against", "",
+              "pipeline: also time this checkpoint in the nodelet's one-pass configuration, interleaved with "
+              "--checkpoint on the same views")
       .option("path", "fast", "network: fast (inference path, as umvs infer) | autograd (MvsNetImpl::forward) | both")
       .flag("no-tuning", "leave OpenBLAS threads and malloc as the environment sets them (see tune_cpu_process)")
       .flag("refine", "include the refinement network")
@@ -291,6 +347,9 @@ UMVS_COMMAND(bench, "time and memory of the network on synthetic input") {
   const int W = args.integer("width"), H = args.integer("height"), D = args.integer("num-depth"), V = args.integer("views");
   const int runs = args.integer("runs");
   if (runs < 1) throw std::invalid_argument("--runs must be >= 1");
+  if (!args.str("against").empty() && args.str("case") != "pipeline") {
+    throw std::invalid_argument("--against is for --case pipeline only");
+  }
   if (args.str("case") == "fusion") return umvs::bench_fusion(args, device);
   if (args.str("case") == "pipeline") return umvs::bench_pipeline(args, device);
   if (args.str("case") != "network") throw std::invalid_argument("unknown --case '" + args.str("case") + "'");
