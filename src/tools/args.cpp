@@ -5,11 +5,12 @@
 #include <algorithm>
 #include <cerrno>
 #include <climits>
-#include <cstdio>
 #include <cstdlib>
 #include <iostream>
 #include <sstream>
 #include <stdexcept>
+
+#include "unsup_mvs/io/run_folder.h"
 
 namespace umvs {
 namespace {
@@ -32,14 +33,7 @@ bool is_integer(const std::string& text) {
 }
 
 // The shortest text that reads back as `v` (--help shows 0.001, not 0.0010000000000000000208).
-std::string number_text(double v) {
-  char text[32];
-  for (int digits = 6; digits <= 17; ++digits) {
-    std::snprintf(text, sizeof(text), "%.*g", digits, v);
-    if (std::strtod(text, nullptr) == v) break;
-  }
-  return text;
-}
+std::string number_text(double v) { return option_text(nlohmann::json(v)); }
 
 // Levenshtein distance, for "did you mean".
 size_t edit_distance(const std::string& a, const std::string& b) {
