@@ -242,89 +242,70 @@ TEST(Training, FrozenBatchNormNormalisesAsAtInferenceKeepsItsStatisticsAndStillL
   }
 }
 
-TEST(Training, ShortRunFromRandomWeightsReducesDepthError) {
-  // 160x128 input, 32 planes, a single room scene without lighting change, robust loss.
-  const std::string dir = write_scene("learn", 160, 128, 8, 4);
+// A short run from random weights on one rendered room without lighting change (robust loss,
+// top-K 2): the mean loss of the first and last 16 steps, and the evaluations before and after.
+struct ShortRun {
+  double first_loss = 0, last_loss = 0;
+  Evaluation before, after;
+};
+ShortRun short_run_from_random_weights(const std::string& name, int width, int height, TrainerConfig tcfg, int steps) {
+  const std::string dir = write_scene(name, width, height, 8, 4);
   TupleConfig dcfg;
   dcfg.views_in = 3;
   dcfg.views_loss = 4;
-  dcfg.width = 160;
-  dcfg.height = 128;
+  dcfg.width = width;
+  dcfg.height = height;
   dcfg.max_zoom = 1.0;
   dcfg.jitter = 0.0;
   MvsFolderSource source({dir}, dcfg);
   std::vector<TrainingTuple> eval_tuples;
   for (size_t i = 0; i < source.size(); ++i) eval_tuples.push_back(source.tuple(i, nullptr));
-
   torch::manual_seed(0);
   MvsNetConfig mcfg;
-  mcfg.num_depth = 32;
-  TrainerConfig tcfg;
-  tcfg.num_depth = 32;
+  mcfg.num_depth = tcfg.num_depth;
   tcfg.loss.top_k = 2;
   Trainer trainer(MvsNet(mcfg), torch::kCPU, tcfg);
+  ShortRun run;
   // The untrained network (eval mode, as the trained one is evaluated) predicts a nearly
   // uniform distribution, i.e. depths near the middle of the range.
-  const auto before = trainer.evaluate(eval_tuples);
+  run.before = trainer.evaluate(eval_tuples);
   TupleSampler sampler(source, 1);
-  const int steps = 150;
-  double first_loss = 0, last_loss = 0;
   for (int s = 0; s < steps; ++s) {
     const auto v = trainer.step({sampler.next(false)});
-    ASSERT_TRUE(std::isfinite(v.total)) << "step " << s;
-    if (s < 16) first_loss += v.total / 16;
-    if (s >= steps - 16) last_loss += v.total / 16;
+    if (!std::isfinite(v.total)) throw std::runtime_error("short run: step " + std::to_string(s) + " is not finite");
+    if (s < 16) run.first_loss += v.total / 16;
+    if (s >= steps - 16) run.last_loss += v.total / 16;
   }
-  const auto after = trainer.evaluate(eval_tuples);
-  std::cout << "training loss " << first_loss << " -> " << last_loss << "; depth |err| " << before.depth.mean_abs
-            << " -> " << after.depth.mean_abs << " m; within 1% " << before.depth.within_1pct << " -> "
-            << after.depth.within_1pct << "\n";
-  ASSERT_GT(after.depth.pixels, 1000);
-  EXPECT_LT(last_loss, 0.8 * first_loss);
-  EXPECT_LT(after.depth.mean_abs, 0.6 * before.depth.mean_abs);
-  EXPECT_LT(after.loss.photometric, before.loss.photometric);
+  run.after = trainer.evaluate(eval_tuples);
+  std::cout << name << ": training loss " << run.first_loss << " -> " << run.last_loss << "; depth |err| "
+            << run.before.depth.mean_abs << " -> " << run.after.depth.mean_abs << " m; within 1% "
+            << run.before.depth.within_1pct << " -> " << run.after.depth.within_1pct << "\n";
+  return run;
+}
+
+TEST(Training, ShortRunFromRandomWeightsReducesDepthError) {
+  // 160x128 input, 32 planes.
+  TrainerConfig tcfg;
+  tcfg.num_depth = 32;
+  const ShortRun run = short_run_from_random_weights("learn", 160, 128, tcfg, 150);
+  ASSERT_GT(run.after.depth.pixels, 1000);
+  EXPECT_LT(run.last_loss, 0.8 * run.first_loss);
+  EXPECT_LT(run.after.depth.mean_abs, 0.6 * run.before.depth.mean_abs);
+  EXPECT_LT(run.after.loss.photometric, run.before.loss.photometric);
 }
 
 TEST(Training, CoarseToFineRunFromRandomWeightsReducesDepthError) {
-  // As the run above, with both passes: the first on the images at half size, the map at 1/2 of
-  // the input from a fine pass; the loss on both passes' depth.
-  const std::string dir = write_scene("learn_c2f", 192, 128, 8, 4);
-  TupleConfig dcfg;
-  dcfg.views_in = 3;
-  dcfg.views_loss = 4;
-  dcfg.width = 192;
-  dcfg.height = 128;
-  dcfg.max_zoom = 1.0;
-  dcfg.jitter = 0.0;
-  MvsFolderSource source({dir}, dcfg);
-  std::vector<TrainingTuple> eval_tuples;
-  for (size_t i = 0; i < source.size(); ++i) eval_tuples.push_back(source.tuple(i, nullptr));
-  torch::manual_seed(0);
-  MvsNetConfig mcfg;
-  mcfg.num_depth = 16;
+  // Both passes: the first on the images at half size with 16 planes, the map at 1/2 of the input
+  // from a fine pass; the loss on both passes' depth.
   TrainerConfig tcfg;
   tcfg.num_depth = 16;
-  tcfg.loss.top_k = 2;
   tcfg.fine.planes = 8;
   tcfg.fine.resolution_divisor = 2;
   tcfg.fine.first_pass_downscale = 2;
-  Trainer trainer(MvsNet(mcfg), torch::kCPU, tcfg);
-  const auto before = trainer.evaluate(eval_tuples);
-  TupleSampler sampler(source, 1);
-  const int steps = 100;
-  double first_loss = 0, last_loss = 0;
-  for (int s = 0; s < steps; ++s) {
-    const auto v = trainer.step({sampler.next(false)});
-    ASSERT_TRUE(std::isfinite(v.total)) << "step " << s;
-    if (s < 16) first_loss += v.total / 16;
-    if (s >= steps - 16) last_loss += v.total / 16;
-  }
-  const auto after = trainer.evaluate(eval_tuples);
-  std::cout << "coarse to fine: training loss " << first_loss << " -> " << last_loss << "; depth |err| "
-            << before.depth.mean_abs << " -> " << after.depth.mean_abs << " m\n";
-  ASSERT_GT(after.depth.pixels, 4 * 1000);  // on the 96x64 grid of the map
-  EXPECT_LT(last_loss, 0.8 * first_loss);
-  EXPECT_LT(after.depth.mean_abs, 0.6 * before.depth.mean_abs);
+  const ShortRun run = short_run_from_random_weights("learn_c2f", 192, 128, tcfg, 100);
+  ASSERT_GT(run.after.depth.pixels, 4 * 1000);  // on the 96x64 grid of the map
+  EXPECT_LT(run.last_loss, 0.8 * run.first_loss);
+  EXPECT_LT(run.after.depth.mean_abs, 0.6 * run.before.depth.mean_abs);
   // Refused with the volume terms, which read a probability volume over the first pass's planes.
   TrainerConfig bad = tcfg;
   bad.entropy_weight = 0.01;
