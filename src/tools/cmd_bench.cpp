@@ -169,11 +169,12 @@ void time_estimate(DepthEstimator& estimator, const std::vector<ViewInput>& view
   t.network.push_back(map.seconds);
   t.completion.push_back(map.completion_seconds);
   const MvsStageTimes& st = map.stages;
-  t.first_pass.push_back(st.features + st.cost_volume + st.regularization + st.regression + st.refinement);
+  const double fine_pass = st.fine_cost_volume + st.fine_regularization;  // inside cost_volume and regularization
+  t.first_pass.push_back(st.features + st.cost_volume + st.regularization + st.regression + st.refinement - fine_pass);
   t.features.push_back(st.features);
   t.volume.push_back(st.cost_volume);
   t.unet.push_back(st.regularization);
-  t.fine_pass.push_back(st.fine_cost_volume + st.fine_regularization);
+  t.fine_pass.push_back(fine_pass);
   t.extra_passes += map.per_source_passes ? 1 : 0;
   t.width = map.camera.width;
   t.height = map.camera.height;
@@ -202,11 +203,13 @@ void print_pipeline_block(const std::string& header, const PipelineTimes& t, boo
   std::cout << header;
   line("image to depth map (estimate)", t.total);
   line("network, every pass", t.network);
-  line("network, first pass", t.first_pass);
   line("  features", t.features);
   line("  cost volume", t.volume);
   line("  3-D U-Net", t.unet);
-  if (fine) line("  of which the fine pass", t.fine_pass);
+  if (fine) {
+    line("  of the last two, the fine pass", t.fine_pass);
+    line("network, first pass", t.first_pass);
+  }
   line("completion", t.completion);
 }
 
