@@ -278,6 +278,18 @@ FastMvsNet::~FastMvsNet() = default;
 
 bool FastMvsNet::accelerates(const torch::Device& device) { return device.is_cpu() && at::hasMKLDNN(); }
 
+torch::Tensor FastMvsNet::plane_probabilities(const torch::Tensor& features, const torch::Tensor& proj,
+                                              const torch::Tensor& depth_values, MvsStageTimes& t) {
+  auto t0 = Clock::now();
+  const VarianceCostVolume volume(features, proj, depth_values, model_->config().feature_warp);
+  t.cost_volume += lap(t0);
+  double volume_seconds = 0;  // the slabs' share of the U-Net's call
+  auto prob = torch::softmax(unet_->forward(volume, slab_floats_, &volume_seconds), 1);
+  t.cost_volume += volume_seconds;
+  t.regularization += lap(t0) - volume_seconds;
+  return prob;
+}
+
 MvsOutput FastMvsNet::forward(const torch::Tensor& images, const torch::Tensor& proj, const torch::Tensor& depth_values,
                               bool keep_prob_volume, MvsStageTimes* times) {
   torch::NoGradGuard no_grad;
@@ -289,13 +301,9 @@ MvsOutput FastMvsNet::forward(const torch::Tensor& images, const torch::Tensor& 
   auto t0 = Clock::now();
   auto features = model_->view_features(images);
   t.features = lap(t0);
-  const VarianceCostVolume volume(features, proj, depth_values, model_->config().feature_warp);
+  auto prob = plane_probabilities(features, proj, depth_values, t);
   features = torch::Tensor();
-  t.cost_volume = lap(t0);
-  double volume_seconds = 0;
-  auto prob = torch::softmax(unet_->forward(volume, slab_floats_, &volume_seconds), 1);
-  t.cost_volume += volume_seconds;
-  t.regularization = lap(t0) - volume_seconds;
+  t0 = Clock::now();
   MvsOutput out;
   out.depth_init = expected_depth(prob, depth_values);
   out.confidence = photometric_confidence(prob);
@@ -327,16 +335,9 @@ MvsOutput FastMvsNet::forward_coarse_to_fine(const torch::Tensor& images, const 
     coarse_proj = half_proj;
   }
   t.features = lap(t0);
-  torch::Tensor coarse_prob;
-  {
-    const VarianceCostVolume volume(coarse_features, coarse_proj, depth_values, warp);
-    t.cost_volume = lap(t0);
-    double volume_seconds = 0;
-    coarse_prob = torch::softmax(unet_->forward(volume, slab_floats_, &volume_seconds), 1);
-    t.cost_volume += volume_seconds;
-    t.regularization = lap(t0) - volume_seconds;
-  }
+  auto coarse_prob = plane_probabilities(coarse_features, coarse_proj, depth_values, t);
   coarse_features = torch::Tensor();
+  t0 = Clock::now();
   MvsOutput out;
   out.depth_init = expected_depth(coarse_prob, depth_values);
   FineGrid grid = to_fine_grid(out.depth_init, photometric_confidence(coarse_prob), features, fine);

@@ -68,6 +68,11 @@ class FastMvsNet {
 
  private:
   struct FoldedUNet;
+  // A pass's probability volume on the fast path: the cost volume built a slab at a time through
+  // the folded U-Net, softmax over the planes; adds the seconds of each to t.cost_volume and
+  // t.regularization.  features [B,V,C,h,w]; depth_values [B,D]  -> [B,D,h,w]
+  torch::Tensor plane_probabilities(const torch::Tensor& features, const torch::Tensor& proj,
+                                    const torch::Tensor& depth_values, MvsStageTimes& t);
   MvsNet model_;
   int64_t slab_floats_;
   std::unique_ptr<FoldedUNet> unet_;
