@@ -224,5 +224,27 @@ TEST(TrainArguments, VolumeTermsAndFrozenBatchNormAreCheckedFirstAndRecorded) {
   EXPECT_FALSE(read_csv_rows(dir + "/default/train_log.csv").back().number("plane_loss").has_value());
 }
 
+// A half-size first pass needs sizes in multiples of 64: the options say so before anything is
+// written; the images' own size (--width 0), when the first batch is built, without a backtrace.
+TEST(TrainArguments, CoarseToFineSizesAreCheckedAndTheRunRecordsItsPasses) {
+  const std::string data = scene("train_c2f_data", 160, 128);
+  const std::string dir = test::temp_dir("train_c2f");
+  const std::string flags = " --num-depth 16 --views-loss 3 --top-k 2 --threads 1 --fine-planes 8 --first-pass-downscale 2";
+  Result sized = run_umvs("train --data " + data + flags + " --width 96 --height 64 --steps 2 --out " + dir + "/sized");
+  EXPECT_EQ(sized.status, 2) << sized.output;
+  EXPECT_TRUE(contains(sized.output, "--width and --height must be multiples of 64, got 96x64")) << sized.output;
+  EXPECT_FALSE(fs::exists(dir + "/sized"));
+  Result own = run_umvs("train --data " + data + flags + " --width 0 --height 0 --steps 1 --out " + dir + "/own");
+  EXPECT_EQ(own.status, 1) << own.output;
+  EXPECT_TRUE(contains(own.output, "multiples of 64, got 160x128")) << own.output;
+  EXPECT_FALSE(contains(own.output, "Exception raised from")) << own.output;
+  Result run = run_umvs("train --data " + data + flags + " --width 128 --height 128 --steps 2 --out " + dir + "/run");
+  ASSERT_EQ(run.status, 0) << run.output;
+  const RunOptions stored = recorded(dir + "/run");
+  EXPECT_EQ(stored.at("fine-planes"), 8);
+  EXPECT_EQ(stored.at("first-pass-downscale"), 2);
+  EXPECT_TRUE(fs::exists(dir + "/run/last.pt"));
+}
+
 }  // namespace
 }  // namespace umvs

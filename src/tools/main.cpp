@@ -1,4 +1,6 @@
 // umvs: the unsup_mvs command line. Each subcommand lives in src/tools/cmd_*.cpp.
+#include <c10/util/Exception.h>
+
 #include <iostream>
 
 #include "unsup_mvs/tools/args.h"
@@ -36,6 +38,9 @@ int main(int argc, char** argv) {
   } catch (const std::invalid_argument& e) {
     std::cerr << "umvs " << argv[1] << ": error: " << e.what() << "\n";
     return 2;
+  } catch (const c10::Error& e) {  // LibTorch's checks: the message, not its C++ backtrace
+    std::cerr << "umvs " << argv[1] << ": error: " << e.what_without_backtrace() << "\n";
+    return 1;
   } catch (const std::exception& e) {
     std::cerr << "umvs " << argv[1] << ": error: " << e.what() << "\n";
     return 1;
