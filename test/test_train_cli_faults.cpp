@@ -226,7 +226,7 @@ TEST(TrainArguments, VolumeTermsAndFrozenBatchNormAreCheckedFirstAndRecorded) {
 
 // A half-size first pass needs sizes in multiples of 64: the options say so before anything is
 // written; the images' own size (--width 0), when the first batch is built, without a backtrace.
-TEST(TrainArguments, CoarseToFineSizesAreCheckedAndTheRunRecordsItsPasses) {
+TEST(TrainArguments, CoarseToFineSizesAreCheckedAndTheRunRecordsItsPassesAndBatchNorm) {
   const std::string data = scene("train_c2f_data", 160, 128);
   const std::string dir = test::temp_dir("train_c2f");
   const std::string flags = " --num-depth 16 --views-loss 3 --top-k 2 --threads 1 --fine-planes 8 --first-pass-downscale 2";
@@ -243,7 +243,16 @@ TEST(TrainArguments, CoarseToFineSizesAreCheckedAndTheRunRecordsItsPasses) {
   const RunOptions stored = recorded(dir + "/run");
   EXPECT_EQ(stored.at("fine-planes"), 8);
   EXPECT_EQ(stored.at("first-pass-downscale"), 2);
-  EXPECT_TRUE(fs::exists(dir + "/run/last.pt"));
+  EXPECT_EQ(stored.at("batchnorm"), "train");  // from random weights: no statistics to keep
+  ASSERT_TRUE(fs::exists(dir + "/run/last.pt"));
+  // From a model, both passes normalise with its statistics unless --batchnorm says otherwise.
+  const std::string tune = flags + " --init " + dir + "/run/last.pt --width 128 --height 128 --steps 1 --out " + dir;
+  Result frozen = run_umvs("train --data " + data + tune + "/frozen");
+  ASSERT_EQ(frozen.status, 0) << frozen.output;
+  EXPECT_EQ(recorded(dir + "/frozen").at("batchnorm"), "frozen");
+  Result batch_statistics = run_umvs("train --data " + data + tune + "/train --batchnorm train");
+  ASSERT_EQ(batch_statistics.status, 0) << batch_statistics.output;
+  EXPECT_EQ(recorded(dir + "/train").at("batchnorm"), "train");
 }
 
 }  // namespace

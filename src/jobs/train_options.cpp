@@ -38,10 +38,11 @@ TrainerConfig trainer_config(const TrainOptions& o, int num_depth) {
   t.lr_min = o.lr_min;
   t.beta1 = o.beta1;
   t.micro_batch = o.micro_batch;
-  if (o.batchnorm != "train" && o.batchnorm != "frozen") {
-    throw std::invalid_argument("--batchnorm must be train or frozen, got '" + o.batchnorm + "'");
+  const std::string batchnorm = o.batchnorm_mode();
+  if (batchnorm != "train" && batchnorm != "frozen") {
+    throw std::invalid_argument("--batchnorm must be train or frozen, got '" + batchnorm + "'");
   }
-  t.freeze_batchnorm = o.batchnorm == "frozen";
+  t.freeze_batchnorm = batchnorm == "frozen";
   t.sources = source_combination_from_string(o.source_combination);
   t.fine.planes = o.fine_planes;
   t.fine.span = o.fine_span;
@@ -88,6 +89,11 @@ PlaneCount training_plane_count(const TrainOptions& o, const std::optional<RunOp
 }
 
 }  // namespace
+
+std::string TrainOptions::batchnorm_mode() const {
+  if (was_given("batchnorm")) return batchnorm;
+  return fine_planes > 0 && !init.empty() ? "frozen" : "train";
+}
 
 void TrainOptions::validate() const {
   auto at_least = [](const char* name, int value, int lowest) {

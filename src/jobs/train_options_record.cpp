@@ -78,7 +78,7 @@ void visit_options(const TrainOptions& o, Visit&& visit) {
   visit("steps", o.steps);
   visit("batch", o.batch);
   visit("micro-batch", o.micro_batch);
-  visit("batchnorm", o.batchnorm);
+  visit("batchnorm", o.batchnorm_mode());
   visit("lr", o.lr);
   visit("lr-schedule", o.lr_schedule);
   visit("lr-min", o.lr_min);

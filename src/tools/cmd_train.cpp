@@ -169,7 +169,8 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
             "BatchNorm statistics are per micro-batch")
       .bind("batchnorm", &o.batchnorm,
             "train (normalise with each batch's statistics and update the running ones) | frozen (normalise "
-            "with the --init model's running statistics and keep them: small-batch fine-tuning)")
+            "with the --init model's running statistics and keep them: small-batch fine-tuning); default: frozen "
+            "with --fine-planes and --init, else train")
       .bind("lr", &o.lr, "Adam learning rate (at the first step)")
       .bind("lr-schedule", &o.lr_schedule,
             "constant | cosine (from --lr at the first step down to --lr-min at the last of --steps)")

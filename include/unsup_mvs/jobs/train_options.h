@@ -57,7 +57,7 @@ struct TrainOptions {
   std::string depth_sampling = "depth", feature_warp;
   // The optimisation.
   int steps = 10000, batch = 1, micro_batch = 0;
-  std::string batchnorm = "train";
+  std::string batchnorm = "train";  // when not given: batchnorm_mode()
   double lr = 1e-3;
   std::string lr_schedule = "constant";
   double lr_min = 0, beta1 = 0.95;
@@ -79,6 +79,10 @@ struct TrainOptions {
   bool was_given(const std::string& name) const { return given.count(name) > 0; }
 
   bool self_training() const { return self_training_every > 0; }
+  // --batchnorm as given; when not given, frozen for a coarse-to-fine run from --init (training
+  // statistics would average the two passes' volumes into one running mean that fits neither),
+  // else train.
+  std::string batchnorm_mode() const;
   bool anchored() const { return self_training() && anchor_unconfirmed; }
 
   // Every check that needs no file, before anything is read or written. Throws
