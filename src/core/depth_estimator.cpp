@@ -152,6 +152,16 @@ torch::Tensor parallax_shift_px(const torch::Tensor& depth, const Camera& depth_
 DepthEstimator::DepthEstimator(MvsNet model, torch::Device device, DepthEstimatorConfig config)
     : device_(device), network_(moved_to(std::move(model), device)), config_(config) {
   config_.validate();
+  const MvsNetConfig& net = network_.model()->config();
+  if (net.planes_fixed_by_weights() && config_.num_depth != 0 && config_.num_depth != net.num_depth) {
+    throw std::invalid_argument("num_depth: this " + std::string(to_string(net.network)) + " network sweeps the " +
+                                std::to_string(net.num_depth) + " planes its weights were trained for, asked for " +
+                                std::to_string(config_.num_depth) + " (0 = the network's own)");
+  }
+  if (net.network != NetworkKind::kMvsNet && config_.fine.enabled()) {
+    throw std::invalid_argument(std::string("fine pass: runs MVSNet twice; this is a ") + to_string(net.network) +
+                                " network (its map is at 1/2 of the input already)");
+  }
 }
 
 std::function<double(const Eigen::Vector3d&)> DepthEstimator::source_warp_loss(const ViewInput& reference,
@@ -176,8 +186,9 @@ std::function<double(const Eigen::Vector3d&)> DepthEstimator::source_warp_loss(c
     torch::NoGradGuard no_grad;
     const Camera turned = source_camera.turned(degrees * kRadiansPerDegree);
     const auto proj = mvsnet_projection_matrices({ref_camera, turned}).unsqueeze(0).to(device_);
-    const auto depth = network_.forward(batch, proj, depth_values, false).depth;  // [1,h/4,w/4]
-    const auto full_depth = depth.repeat_interleave(4, 1).repeat_interleave(4, 2);
+    const auto depth = network_.forward(batch, proj, depth_values, false).depth;  // [1,h/s,w/s]
+    const int64_t divisor = network_.model()->config().map_divisor();
+    const auto full_depth = depth.repeat_interleave(divisor, 1).repeat_interleave(divisor, 2);
     const auto T = relative_pose_tensor(ref_camera, turned).unsqueeze(0).to(device_);
     const InverseWarp warp = inverse_warp(source_image, K_ref, K_source, T, full_depth);
     return ssim_loss_map(ref_image, warp.warped, warp.valid);
@@ -212,8 +223,9 @@ SourceTurn DepthEstimator::best_source_turn(const ViewInput& reference, const Vi
   // The height bound follows the width's scale; + 31 so that rounding does not lose a 32-pixel row.
   const NetworkResize half =
       plan_network_resize(width, height, search_width, full.height * search_width / std::max(1, full.width) + 31);
-  const auto half_size_loss = source_warp_loss(reference, source, half, std::max(8, num_depth() / 2 / 8 * 8),
-                                               depth_min, depth_max);
+  const int search_planes =
+      network_.model()->config().planes_fixed_by_weights() ? num_depth() : std::max(8, num_depth() / 2 / 8 * 8);
+  const auto half_size_loss = source_warp_loss(reference, source, half, search_planes, depth_min, depth_max);
   const RotationSearch search =
       search_rotation([&](const Eigen::Vector3d& d) { return -half_size_loss(d); }, limit_deg);
   const auto gain = [](double loss_at_pose, double loss_turned) {
@@ -253,8 +265,8 @@ DepthMap DepthEstimator::estimate(const std::vector<ViewInput>& views, double de
     cameras.push_back(apply_network_resize(v.camera, plan));
   }
   const int D = num_depth();
-  // The map's resolution: the fine pass's, else the network's 1/4.
-  const int divisor = config_.fine.enabled() ? config_.fine.resolution_divisor : 4;
+  // The map's resolution: the fine pass's, else the network's (1/4 for MVSNet, 1/2 for sweep2d).
+  const int divisor = config_.fine.enabled() ? config_.fine.resolution_divisor : network_.model()->config().map_divisor();
   auto depth_values = depth_hypotheses(depth_min, depth_max, D, network_.model()->config().depth_sampling);
 
   const auto t0 = std::chrono::steady_clock::now();

@@ -17,6 +17,7 @@
 #include <type_traits>
 #include <vector>
 
+#include "feature_sampling.h"
 #include "unsup_mvs/core/fine_pass.h"
 #include "unsup_mvs/core/geometry.h"
 
@@ -271,7 +272,8 @@ struct FastMvsNet::FoldedUNet {
 FastMvsNet::FastMvsNet(MvsNet model, int64_t slab_floats) : model_(std::move(model)), slab_floats_(slab_floats) {
   TORCH_CHECK(slab_floats > 0, "FastMvsNet: slab_floats must be positive");
   model_->eval();
-  if (at::hasMKLDNN()) unet_ = std::make_unique<FoldedUNet>(*model_->cost_regularization);
+  // A sweep2d network has no 3-D U-Net: its forward() is 2-D convolutions, already on oneDNN.
+  if (at::hasMKLDNN() && model_->cost_regularization) unet_ = std::make_unique<FoldedUNet>(*model_->cost_regularization);
 }
 
 FastMvsNet::~FastMvsNet() = default;
@@ -293,6 +295,10 @@ torch::Tensor FastMvsNet::plane_probabilities(const torch::Tensor& features, con
 MvsOutput FastMvsNet::forward(const torch::Tensor& images, const torch::Tensor& proj, const torch::Tensor& depth_values,
                               bool keep_prob_volume, MvsStageTimes* times) {
   torch::NoGradGuard no_grad;
+  if (model_->config().network == NetworkKind::kSweep2d) {
+    MvsNetImpl::check_inputs(images, proj, depth_values);
+    return model_->forward_sweep2d(images, proj, depth_values, keep_prob_volume, times);
+  }
   if (!unet_ || !accelerates(images.device()) || images.scalar_type() != torch::kFloat32) {
     return model_->forward(images, proj, depth_values, keep_prob_volume);
   }
@@ -319,6 +325,8 @@ MvsOutput FastMvsNet::forward_coarse_to_fine(const torch::Tensor& images, const 
                                              const torch::Tensor& depth_values, const FinePassConfig& fine,
                                              const torch::Tensor& proj_fine, MvsStageTimes* times) {
   torch::NoGradGuard no_grad;
+  TORCH_CHECK(model_->config().network == NetworkKind::kMvsNet, "a fine pass runs MVSNet twice; this is a ",
+              to_string(model_->config().network), " network (its map is at 1/2 already)");
   check_coarse_to_fine_inputs(images, proj, depth_values, fine, proj_fine);
   const bool fast = unet_ && accelerates(images.device()) && images.scalar_type() == torch::kFloat32;
   if (!fast) return coarse_to_fine_forward(*model_, images, proj, depth_values, fine, proj_fine);
@@ -391,15 +399,8 @@ torch::Tensor VarianceCostVolume::planes(int64_t begin, int64_t end) const {
   const float* fea_p = features_.data_ptr<float>();
   const float* depth_p = depth_.data_ptr<float>();
   float* volume_p = volume.data_ptr<float>();
-  // The arithmetic of homography_warp + ATen's CPU grid_sample, in the same order: a grid
-  // coordinate g maps to the pixel (g + 1) * (W - 1) / 2 with align_corners = true (exact) and to
-  // (g + 1) * W / 2 - 0.5 with align_corners = false (MVSNet_pytorch).
-  const float norm_x = static_cast<float>((W - 1) / 2.0), norm_y = static_cast<float>((H - 1) / 2.0);
-  const bool exact = warp_ == FeatureWarp::kExact;
-  const float scale_x = exact ? norm_x : static_cast<float>(W) / 2, scale_y = exact ? norm_y : static_cast<float>(H) / 2;
-  const float shift = exact ? 0.0f : 0.5f;
+  const detail::HomographySampler sampler(H, W, C, warp_);
   const float num_views = static_cast<float>(V);
-  const std::vector<float> zeros(C, 0.0f);
 
   // One task per (batch, plane, row); each keeps its row's sums in [w,C] buffers.
   at::parallel_for(0, B * P * H, 4, [&](int64_t task_begin, int64_t task_end) {
@@ -424,26 +425,13 @@ torch::Tensor VarianceCostVolume::planes(int64_t begin, int64_t end) const {
         const float* ry = rx + HW;
         const float* rz = ry + HW;
         const float* t = trans_[v - 1].data_ptr<float>() + b * 3;
+        detail::FeatureTaps taps;
         for (int64_t x = 0; x < W; ++x) {
           const float z = z_row ? z_row[x] : z_plane;
           const float px = rx[x] * z + t[0], py = ry[x] * z + t[1], pz = rz[x] * z + t[2];
-          float gx = px / pz / norm_x - 1.0f, gy = py / pz / norm_y - 1.0f;
-          if (!std::isfinite(gx)) gx = -2.0f;  // a point on the source camera plane: outside
-          if (!std::isfinite(gy)) gy = -2.0f;
-          const float ix = (gx + 1.0f) * scale_x - shift, iy = (gy + 1.0f) * scale_y - shift;
-          const float x_w = std::floor(ix), y_n = std::floor(iy);
-          const bool west = x_w > -1 && x_w < W, east = x_w > -2 && x_w < W - 1;
-          const bool north = y_n > -1 && y_n < H, south = y_n > -2 && y_n < H - 1;
-          if (!((west || east) && (north || south))) continue;  // all taps outside: adds zeros
-          const float w = ix - x_w, e = 1.0f - w, n = iy - y_n, s = 1.0f - n;
-          const float nw = s * e, ne = s * w, sw = n * e, se = n * w;
-          const int64_t x0 = static_cast<int64_t>(x_w), y0 = static_cast<int64_t>(y_n);
-          const auto tap = [&](bool in, int64_t yy, int64_t xx) { return in ? src + (yy * W + xx) * C : zeros.data(); };
-          const float* p_nw = tap(north && west, y0, x0);
-          const float* p_ne = tap(north && east, y0, x0 + 1);
-          const float* p_sw = tap(south && west, y0 + 1, x0);
-          const float* p_se = tap(south && east, y0 + 1, x0 + 1);
-          accumulate_sample(sum.data() + x * C, sq_sum.data() + x * C, p_nw, p_ne, p_sw, p_se, nw, ne, sw, se, C);
+          if (!sampler.taps(src, px, py, pz, taps)) continue;  // all taps outside: adds zeros
+          accumulate_sample(sum.data() + x * C, sq_sum.data() + x * C, taps.nw, taps.ne, taps.sw, taps.se, taps.w_nw,
+                            taps.w_ne, taps.w_sw, taps.w_se, C);
         }
       }
       for (int64_t c = 0; c < C; ++c) {

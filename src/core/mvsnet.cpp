@@ -2,6 +2,7 @@
 
 #include <torch/torch.h>
 
+#include <chrono>
 #include <sstream>
 #include <stdexcept>
 
@@ -32,15 +33,40 @@ torch::Tensor normalize_input_images(const torch::Tensor& images, InputNormaliza
   return (images - mean) * torch::rsqrt(var + 1e-6);
 }
 
+const char* to_string(NetworkKind n) {
+  switch (n) {
+    case NetworkKind::kMvsNet: return "mvsnet";
+    case NetworkKind::kSweep2d: return "sweep2d";
+  }
+  return "?";
+}
+
+NetworkKind network_kind_from_string(const std::string& name) {
+  if (name == "mvsnet") return NetworkKind::kMvsNet;
+  if (name == "sweep2d") return NetworkKind::kSweep2d;
+  throw std::invalid_argument("network must be mvsnet or sweep2d, got '" + name + "'");
+}
+
 void MvsNetConfig::validate() const {
   if (num_depth < 8 || num_depth % 8 != 0) {
     throw std::invalid_argument("num_depth must be a positive multiple of 8 (the 3-D U-Net halves it "
                                 "three times), got " + std::to_string(num_depth));
   }
   if (num_views < 2) throw std::invalid_argument("num_views must be >= 2, got " + std::to_string(num_views));
+  if (network == NetworkKind::kSweep2d && refine) {
+    throw std::invalid_argument("refine: the sweep2d network has no refinement network (its map is at 1/2 already)");
+  }
 }
 
 std::string MvsNetConfig::architecture_mismatch(const MvsNetConfig& other) const {
+  if (network != other.network) {
+    return std::string("network: ") + umvs::to_string(network) + " here, " + umvs::to_string(other.network) +
+           " in the other model";
+  }
+  if (planes_fixed_by_weights() && num_depth != other.num_depth) {
+    return "planes (fixed by a sweep2d network's weights): " + std::to_string(num_depth) + " here, " +
+           std::to_string(other.num_depth) + " in the other model";
+  }
   if (refine != other.refine) {
     return std::string("refinement network: ") + (refine ? "present" : "absent") + " here, " +
            (other.refine ? "present" : "absent") + " in the other model";
@@ -50,7 +76,7 @@ std::string MvsNetConfig::architecture_mismatch(const MvsNetConfig& other) const
 
 std::string MvsNetConfig::to_string() const {
   std::ostringstream os;
-  os << "num_depth=" << num_depth << " depth_sampling=" << umvs::to_string(depth_sampling)
+  os << "network=" << umvs::to_string(network) << " num_depth=" << num_depth << " depth_sampling=" << umvs::to_string(depth_sampling)
      << " refine=" << (refine ? "true" : "false") << " num_views=" << num_views
      << " input_normalization=" << umvs::to_string(input_normalization)
      << " feature_warp=" << umvs::to_string(feature_warp);
@@ -153,9 +179,22 @@ torch::Tensor photometric_confidence(const torch::Tensor& prob) {
 
 MvsNetImpl::MvsNetImpl(const MvsNetConfig& config) : config_(config) {
   config_.validate();
+  if (config_.network == NetworkKind::kSweep2d) {
+    sweep_features = register_module("sweep_features", SweepFeatureNet());
+    cost_decoder = register_module("cost_decoder", CostDecoder2D(config_.num_depth));
+    return;
+  }
   feature = register_module("feature", FeatureNet());
   cost_regularization = register_module("cost_regularization", CostRegNet());
   if (config_.refine) refine_network = register_module("refine_network", RefineNet());
+}
+
+void MvsNetImpl::set_num_depth(int d) {
+  if (config_.planes_fixed_by_weights() && d != config_.num_depth) {
+    throw std::invalid_argument("this sweep2d network was trained for " + std::to_string(config_.num_depth) +
+                                " planes (its weights fix the count), asked for " + std::to_string(d));
+  }
+  config_.num_depth = d;
 }
 
 void MvsNetImpl::check_inputs(const torch::Tensor& images, const torch::Tensor& proj, const torch::Tensor& depth_values) {
@@ -168,6 +207,7 @@ void MvsNetImpl::check_inputs(const torch::Tensor& images, const torch::Tensor& 
 }
 
 torch::Tensor MvsNetImpl::view_features(const torch::Tensor& images) {
+  TORCH_CHECK(feature, "view_features: MVSNet's feature net; this is a ", to_string(config_.network), " network");
   const int64_t B = images.size(0), V = images.size(1);
   // Shared feature extractor over all views at once.
   auto features = feature(normalize_input_images(images.flatten(0, 1), config_.input_normalization));  // [B*V,32,h,w]
@@ -184,9 +224,43 @@ torch::Tensor MvsNetImpl::refine_depth(const torch::Tensor& images, const torch:
   return refine_network(small, depth_init, depth_values.select(1, 0), depth_values.select(1, depth_values.size(1) - 1));
 }
 
+MvsOutput MvsNetImpl::forward_sweep2d(const torch::Tensor& images, const torch::Tensor& proj,
+                                      const torch::Tensor& depth_values, bool keep_prob_volume, MvsStageTimes* times) {
+  TORCH_CHECK(sweep_features, "forward_sweep2d: this is a ", to_string(config_.network), " network");
+  TORCH_CHECK(depth_values.size(1) == config_.num_depth, "this sweep2d network was trained for ", config_.num_depth,
+              " planes (its weights fix the count), got ", depth_values.size(1));
+  using Clock = std::chrono::steady_clock;
+  auto t0 = Clock::now();
+  const auto lap = [&t0](double MvsStageTimes::*stage, MvsStageTimes* t) {
+    const auto t1 = Clock::now();
+    if (t) t->*stage = std::chrono::duration<double>(t1 - t0).count();
+    t0 = t1;
+  };
+  const int64_t B = images.size(0), V = images.size(1);
+  const auto f = sweep_features(normalize_input_images(images.flatten(0, 1), config_.input_normalization));
+  lap(&MvsStageTimes::features, times);
+  const auto per_view = [&](const torch::Tensor& t) { return t.view({B, V, t.size(1), t.size(2), t.size(3)}); };
+  const auto cost = cosine_cost_volume(per_view(f.matching), proj, depth_values, config_.feature_warp);
+  lap(&MvsStageTimes::cost_volume, times);
+  const auto logits = cost_decoder(cost, per_view(f.quarter).select(1, 0), per_view(f.half).select(1, 0));
+  lap(&MvsStageTimes::regularization, times);
+  const auto prob = torch::softmax(logits, 1);
+  MvsOutput out;
+  out.depth_init = expected_depth(prob, depth_values);
+  {
+    torch::NoGradGuard no_grad;
+    out.confidence = photometric_confidence(prob);
+  }
+  out.depth = out.depth_init;
+  if (keep_prob_volume) out.prob_volume = prob;
+  lap(&MvsStageTimes::regression, times);
+  return out;
+}
+
 MvsOutput MvsNetImpl::forward(const torch::Tensor& images, const torch::Tensor& proj,
                               const torch::Tensor& depth_values, bool keep_prob_volume) {
   check_inputs(images, proj, depth_values);
+  if (config_.network == NetworkKind::kSweep2d) return forward_sweep2d(images, proj, depth_values, keep_prob_volume);
   const int64_t V = images.size(1);
   auto features = view_features(images);  // [B,V,32,h,w]
   const int64_t D = depth_values.size(1);

@@ -114,7 +114,10 @@ std::vector<torch::Tensor> reference_depths(MvsNet& model, const std::vector<Tra
 }
 
 torch::Tensor seen_by_loss_views(const TrainingTuple& t, const torch::Tensor& depth) {
-  const Camera ref = depth_map_camera(t.network_views.at(0).camera);
+  // The map's grid (1/4 of the input for MVSNet, 1/2 for sweep2d) from its width.
+  const int input_width = t.network_views.at(0).camera.width;
+  const int divisor = depth.dim() == 2 && depth.size(1) > 0 && depth.size(1) * 2 == input_width ? 2 : 4;
+  const Camera ref = depth_map_camera(t.network_views.at(0).camera, 1.0 / divisor);
   if (depth.dim() != 2 || depth.size(0) != ref.height || depth.size(1) != ref.width) {
     throw std::invalid_argument("seen_by_loss_views: tuple " + t.name + " has a " + std::to_string(ref.width) + "x" +
                                 std::to_string(ref.height) + " depth grid, got a map of " +
@@ -125,7 +128,7 @@ torch::Tensor seen_by_loss_views(const TrainingTuple& t, const torch::Tensor& de
   const auto K_ref = intrinsics_tensor(ref).unsqueeze(0);
   auto seen = torch::zeros({ref.height, ref.width}, torch::kBool);
   for (const auto& v : t.loss_views) {
-    const Camera src = depth_map_camera(v.camera);
+    const Camera src = depth_map_camera(v.camera, 1.0 / divisor);
     const auto p = project_to_source(K_ref, intrinsics_tensor(src).unsqueeze(0),
                                      relative_pose_tensor(ref, src).unsqueeze(0), d);
     seen |= inside_source(p, src.width, src.height)[0];  // the photometric loss's own test

@@ -291,7 +291,7 @@ torch::Tensor on_map_grid(const torch::Tensor& depth, int64_t map_height) {
 
 LossValues Trainer::forward_backward(const std::vector<TrainingTuple>& tuples, double weight) {
   const auto b = make_training_batch(tuples, config_.num_depth, model_->config().depth_sampling, device_,
-                                     config_.map_divisor());
+                                     config_.map_divisor(model_->config()));
   const bool entropy_term = config_.entropy_weight > 0, plane_term = config_.plane_loss_weight > 0;
   const auto out = training_forward(*model_, b, config_, /*keep_prob_volume=*/entropy_term || plane_term);
   // The depths that learn: the map, and with a fine pass also the first pass's (on the map's grid).
@@ -362,7 +362,7 @@ Evaluation evaluate_model(MvsNet& model, const std::vector<TrainingTuple>& tuple
   std::vector<torch::Tensor> est, gt;
   for (const auto& t : tuples) {
     const auto b = make_training_batch({t}, config.num_depth, model->config().depth_sampling, device,
-                                       config.map_divisor());
+                                       config.map_divisor(model->config()));
     const auto out = training_forward(*model, b, config, /*keep_prob_volume=*/false);
     sum.add(unsupervised_loss(b.loss_ref, b.loss_src, b.K_ref, b.K_src, b.T_src_ref, out.depth, config.loss));
     if (b.depth_gt.defined()) {

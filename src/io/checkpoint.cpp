@@ -31,6 +31,7 @@ std::string tensor_to_bytes(const torch::Tensor& t) {
 
 c10::impl::GenericDict config_to_dict(const MvsNetConfig& c) {
   c10::impl::GenericDict d(c10::StringType::get(), c10::AnyType::get());
+  d.insert("network", std::string(to_string(c.network)));
   d.insert("num_depth", static_cast<int64_t>(c.num_depth));
   d.insert("depth_sampling", std::string(to_string(c.depth_sampling)));
   d.insert("refine", c.refine);
@@ -43,6 +44,8 @@ c10::impl::GenericDict config_to_dict(const MvsNetConfig& c) {
 MvsNetConfig config_from_dict(const c10::impl::GenericDict& d, const std::string& path) {
   MvsNetConfig c;
   try {
+    // Checkpoints written before the field existed are MVSNet's.
+    if (d.contains("network")) c.network = network_kind_from_string(d.at("network").toStringRef());
     c.num_depth = static_cast<int>(d.at("num_depth").toInt());
     c.depth_sampling = depth_sampling_from_string(d.at("depth_sampling").toStringRef());
     c.refine = d.at("refine").toBool();

@@ -287,15 +287,15 @@ class InferenceNodelet : public nodelet::Nodelet {
     publishDiagnostics(total, map.seconds, latency, planes, served, refinement);
   }
 
-  // With ~num_depth 0 the planes follow the network input's width as in `umvs infer` (the model
-  // learnt a plane spacing per pixel: 64 planes at 320 wide beat 128 there, 128 beat 64 at 640 wide;
-  // docs/results.md). The estimator is rebuilt when the input's size asks for another count.
-  // Under model_mutex_.
+  // With ~num_depth 0 the planes follow the network input's width as in `umvs infer` (MVSNet learnt a
+  // plane spacing per pixel: 64 planes at 320 wide beat 128 there, 128 beat 64 at 640 wide; a sweep2d
+  // network sweeps its own). The estimator is rebuilt when another count is due. Under model_mutex_.
   void fitPlanesToInput(const umvs::ViewInput& reference) {
     if (config_.num_depth > 0) return;
     const umvs::NetworkResize plan = umvs::plan_network_resize(reference.camera.width, reference.camera.height,
                                                                config_.max_width, config_.max_height);
-    const int planes = umvs::default_plane_count(umvs::first_pass_size(config_, plan.width));
+    const int planes =
+        umvs::default_plane_count(estimator_->model()->config(), umvs::first_pass_size(config_, plan.width));
     if (estimator_->config().num_depth == planes) return;
     umvs::DepthEstimatorConfig fitted = config_;
     fitted.num_depth = planes;

@@ -236,24 +236,27 @@ int bench_pipeline(const Args& args, const torch::Device& device) {
   scene_cfg.height = H;
   scene_cfg.gt_cloud_samples = 0;
   const SynthScene scene = render_synthetic_scene(scene_cfg);
-  const auto default_planes = [&](const DepthEstimatorConfig& c) {
-    return default_plane_count(first_pass_size(c, plan_network_resize(W, H, c.max_width, c.max_height).width));
+  const auto default_planes = [&](const DepthEstimatorConfig& c, const LoadedModel& m) {
+    return default_plane_count(m.model->config(),
+                               first_pass_size(c, plan_network_resize(W, H, c.max_width, c.max_height).width));
   };
   DepthEstimatorConfig cfg = recommended_estimator_config();
   if (args.given("fine-planes")) cfg.fine.planes = args.integer("fine-planes");
   if (args.given("fine-span")) cfg.fine.span = args.real("fine-span");
   if (args.given("fine-resolution")) cfg.fine.resolution_divisor = args.integer("fine-resolution");
   if (args.given("first-pass-downscale")) cfg.fine.first_pass_downscale = args.integer("first-pass-downscale");
-  cfg.num_depth = args.given("num-depth") ? args.integer("num-depth") : default_planes(cfg);
-  DepthEstimator estimator(load_model(args.str("checkpoint"), device).model, device, cfg);
+  const LoadedModel model = load_model(args.str("checkpoint"), device);
+  cfg.num_depth = args.given("num-depth") ? args.integer("num-depth") : default_planes(cfg, model);
+  DepthEstimator estimator(model.model, device, cfg);
   // The nodelet's plain one pass: no fine pass, planes by the default rule.
   const std::string against_path = args.str("against");
   std::unique_ptr<DepthEstimator> against;
   if (!against_path.empty()) {
     DepthEstimatorConfig against_cfg = recommended_estimator_config();
     against_cfg.fine = FinePassConfig{};
-    against_cfg.num_depth = default_planes(against_cfg);
-    against = std::make_unique<DepthEstimator>(load_model(against_path, device).model, device, against_cfg);
+    const LoadedModel against_model = load_model(against_path, device);
+    against_cfg.num_depth = default_planes(against_cfg, against_model);
+    against = std::make_unique<DepthEstimator>(against_model.model, device, against_cfg);
   }
   PipelineTimes times, against_times;
   for (int r = 0; r < warmup + runs; ++r) {
@@ -314,6 +317,7 @@ UMVS_COMMAND(bench, "time and memory of the network on synthetic input") {
       .option("width", "640", "image width (multiple of 32)")
       .option("height", "512", "image height (multiple of 32)")
       .option("num-depth", "128", "depth hypotheses")
+      .option("network", "mvsnet", "network case, random weights: mvsnet | sweep2d (a --checkpoint says its own)")
       .option("views", "3", "views per depth map")
       .option("fine-planes", umvs::recommended_estimator_config().fine.planes,
               "pipeline: hypotheses per pixel of the second, finer pass (0 = one pass)")
@@ -360,10 +364,19 @@ UMVS_COMMAND(bench, "time and memory of the network on synthetic input") {
   if (path != "fast" && path != "autograd" && path != "both") throw std::invalid_argument("unknown --path '" + path + "' (fast|autograd|both)");
 
   umvs::MvsNetConfig cfg;
+  cfg.network = umvs::network_kind_from_string(args.str("network"));
   cfg.num_depth = D;
   cfg.num_views = V;
   cfg.refine = args.on("refine");
-  umvs::MvsNet model = args.str("checkpoint").empty() ? umvs::MvsNet(cfg) : umvs::load_model(args.str("checkpoint"), device, &cfg).model;
+  umvs::MvsNet model{nullptr};
+  if (args.str("checkpoint").empty()) {
+    model = umvs::MvsNet(cfg);
+  } else {  // the file's network; MVSNet_pytorch weights (no config) as the options say
+    auto loaded = umvs::load_model(args.str("checkpoint"), device);
+    model = loaded.model;
+    if (loaded.format == "mvsnet_pytorch") model->set_feature_warp(cfg.feature_warp);
+    cfg = model->config();
+  }
   model->to(device);
   umvs::FastMvsNet fast(model);
   torch::manual_seed(0);
@@ -406,7 +419,9 @@ UMVS_COMMAND(bench, "time and memory of the network on synthetic input") {
   }
   const double faults_per_run = static_cast<double>(umvs::minor_page_faults() - faults_before) / order.size();
   const auto s = umvs::summarize(path == "autograd" ? autograd_s : fast_s);
-  const double gflop = umvs::mvsnet_forward_flops(H, W, D, V, cfg.refine) / 1e9;
+  const double gflop = (cfg.network == umvs::NetworkKind::kSweep2d ? umvs::sweep_net_forward_flops(H, W, D, V)
+                                                                    : umvs::mvsnet_forward_flops(H, W, D, V, cfg.refine)) /
+                       1e9;
   const double memory_mib = umvs::peak_rss_mib();
   const bool have_stages = !features_s.empty() && umvs::FastMvsNet::accelerates(device);
   std::ostringstream device_name;
@@ -432,15 +447,17 @@ UMVS_COMMAND(bench, "time and memory of the network on synthetic input") {
     }
     std::cout << out.dump() << "\n";
   } else {
-    std::cout << std::fixed << std::setprecision(3) << "network " << W << "x" << H << " D=" << D << " V=" << V
+    std::cout << std::fixed << std::setprecision(3) << umvs::to_string(cfg.network) << " " << W << "x" << H << " D=" << D << " V=" << V
               << " device=" << device_name.str() << " threads=" << torch::get_num_threads() << " path=" << path_name
               << (args.on("no-tuning") ? " (untuned)" : "") << ": median " << s.median << " s (min " << s.min << ", max "
               << s.max << ", " << s.runs << " runs), " << std::setprecision(1) << gflop << " GFLOP -> " << gflop / s.median
               << " GFLOP/s, peak RSS " << std::setprecision(0) << memory_mib << " MiB, " << faults_per_run
               << " minor page faults per run\n";
     if (have_stages) {
+      const char* regularizer = cfg.network == umvs::NetworkKind::kSweep2d ? "2-D encoder-decoder" : "3-D U-Net";
       std::cout << std::setprecision(4) << "  stages (median s): features " << umvs::summarize(features_s).median
-                << ", cost volume " << umvs::summarize(volume_s).median << ", 3-D U-Net " << umvs::summarize(unet_s).median
+                << ", cost volume " << umvs::summarize(volume_s).median << ", " << regularizer << " "
+                << umvs::summarize(unet_s).median
                 << ", regression " << umvs::summarize(regression_s).median;
       if (cfg.refine) std::cout << ", refinement " << umvs::summarize(refine_s).median;
       std::cout << "\n";

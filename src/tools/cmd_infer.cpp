@@ -163,7 +163,8 @@ UMVS_COMMAND(infer, "depth + confidence maps for an MVSNet-format folder") {
   const umvs::PlaneCount planes = umvs::choose_plane_count(args.integer("num-depth"), "--num-depth",
                                                            umvs::first_pass_size(cfg, plan.width),
                                                            umvs::first_pass_size(cfg, plan.height),
-                                                           loaded.model->config().num_depth);
+                                                           loaded.model->config().num_depth,
+                                                           loaded.model->config().planes_fixed_by_weights());
   cfg.num_depth = planes.planes;
   umvs::DepthEstimator estimator(loaded.model, device, cfg);  // refuses a bad --source-rotation-search
   std::cerr << "model: " << args.str("checkpoint") << " (" << loaded.format << ", " << loaded.model->config().to_string()

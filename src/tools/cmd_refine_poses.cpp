@@ -65,7 +65,8 @@ int refine_poses(int argc, char** argv) {
   const umvs::NetworkResize plan =
       umvs::plan_network_resize(first.width, first.height, estimator_config.max_width, estimator_config.max_height);
   const umvs::PlaneCount planes = umvs::choose_plane_count(args.integer("num-depth"), "--num-depth", plan.width, plan.height,
-                                                           loaded.model->config().num_depth);
+                                                           loaded.model->config().num_depth,
+                                                           loaded.model->config().planes_fixed_by_weights());
   estimator_config.num_depth = planes.planes;
   umvs::DepthEstimator estimator(loaded.model, device, estimator_config);
   std::cerr << "model: " << args.str("checkpoint") << " (" << loaded.format << "), device " << device << ", "

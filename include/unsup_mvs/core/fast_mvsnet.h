@@ -25,17 +25,6 @@
 
 namespace umvs {
 
-// Wall time of the stages of one forward pass, seconds (for `umvs bench`).
-struct MvsStageTimes {
-  double features = 0;        // 2-D feature net over all views
-  double cost_volume = 0;     // warping + variance
-  double regularization = 0;  // 3-D U-Net -> logits
-  double regression = 0;      // softmax, soft-argmin depth, confidence
-  double refinement = 0;      // refinement network (0 without)
-  // Of the above, what the fine pass took (FastMvsNet::forward_coarse_to_fine; 0 without):
-  double fine_cost_volume = 0, fine_regularization = 0;
-};
-
 class FastMvsNet {
  public:
   // Floats of cost volume built at a time (32 MiB): large enough for oneDNN to run at full speed,

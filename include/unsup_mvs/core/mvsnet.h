@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "unsup_mvs/core/geometry.h"
+#include "unsup_mvs/core/sweep_net.h"
 
 namespace umvs {
 
@@ -29,7 +30,21 @@ InputNormalization input_normalization_from_string(const std::string& name);
 // images [...,3,H,W] -> the same shape, normalised per image and channel over H x W.
 torch::Tensor normalize_input_images(const torch::Tensor& images, InputNormalization normalization);
 
+// Which network regularises the cost volume. Saved with checkpoints: a checkpoint selects its network.
+enum class NetworkKind {
+  kMvsNet,   // MVSNet: variance cost volume (32 channels per plane), 3-D U-Net, depth at 1/4
+  kSweep2d,  // the CPU network (core/sweep_net.h): one cosine cost per plane, 2-D encoder-decoder,
+             // depth at 1/2; its last layer has one output per plane, so num_depth is fixed by the weights
+};
+const char* to_string(NetworkKind n);
+// "mvsnet" | "sweep2d"; throws std::invalid_argument listing the accepted names.
+NetworkKind network_kind_from_string(const std::string& name);
+
+// Planes of a new sweep2d network (DeepVideoMVS's 64, in inverse depth).
+constexpr int kSweep2dDefaultPlanes = 64;
+
 struct MvsNetConfig {
+  NetworkKind network = NetworkKind::kMvsNet;
   // Depth hypotheses per reference view. The U-Net needs a multiple of 8. Not a property of the
   // weights: a model trained with 128 planes can run with 192 or 64.
   int num_depth = 128;
@@ -45,7 +60,11 @@ struct MvsNetConfig {
 
   // Throws std::invalid_argument naming the bad field.
   void validate() const;
-  // Fields that change the set of weights (only `refine`); a checkpoint whose architecture
+  // The depth map's grid: 1/4 of the input (MVSNet) or 1/2 (sweep2d).
+  int map_divisor() const { return network == NetworkKind::kSweep2d ? 2 : 4; }
+  // Whether the number of planes is fixed by the weights (sweep2d).
+  bool planes_fixed_by_weights() const { return network == NetworkKind::kSweep2d; }
+  // Fields that change the set of weights (network, `refine`, and num_depth for sweep2d); a checkpoint whose architecture
   // differs from the requested one cannot be loaded. Returns "" when compatible, else a message.
   std::string architecture_mismatch(const MvsNetConfig& other) const;
   std::string to_string() const;
@@ -112,11 +131,23 @@ class RefineNetImpl : public torch::nn::Module {
 };
 TORCH_MODULE(RefineNet);
 
+// Wall time of the stages of one forward pass, seconds (for `umvs bench`).
+struct MvsStageTimes {
+  double features = 0;        // 2-D feature net over all views
+  double cost_volume = 0;     // warping + variance
+  double regularization = 0;  // 3-D U-Net (MVSNet) or 2-D encoder-decoder (sweep2d) -> logits
+  double regression = 0;      // softmax, soft-argmin depth, confidence
+  double refinement = 0;      // refinement network (0 without)
+  // Of the above, what the fine pass took (FastMvsNet::forward_coarse_to_fine; 0 without):
+  double fine_cost_volume = 0, fine_regularization = 0;
+};
+
+// Maps at 1/s of the input, s = MvsNetConfig::map_divisor() (4 for MVSNet, 2 for sweep2d).
 struct MvsOutput {
-  torch::Tensor depth;        // [B,H/4,W/4] metres (refined when the network refines)
-  torch::Tensor confidence;   // [B,H/4,W/4] probability mass of the 4 planes around the estimate
-  torch::Tensor depth_init;   // [B,H/4,W/4] before refinement (== depth without refinement)
-  torch::Tensor prob_volume;  // [B,D,H/4,W/4] (only when asked for)
+  torch::Tensor depth;        // [B,H/s,W/s] metres (refined when the network refines)
+  torch::Tensor confidence;   // [B,H/s,W/s] probability mass of the 4 planes around the estimate
+  torch::Tensor depth_init;   // [B,H/s,W/s] before refinement (== depth without refinement)
+  torch::Tensor prob_volume;  // [B,D,H/s,W/s] (only when asked for)
 };
 
 class MvsNetImpl : public torch::nn::Module {
@@ -140,14 +171,21 @@ class MvsNetImpl : public torch::nn::Module {
 
   const MvsNetConfig& config() const { return config_; }
   // The hypotheses count used by forward() is taken from depth_values; this only updates the
-  // config that is saved with checkpoints and used by callers to build depth_values.
-  void set_num_depth(int d) { config_.num_depth = d; }
+  // config that is saved with checkpoints and used by callers to build depth_values. A sweep2d
+  // network's planes are fixed by its weights: another count throws std::invalid_argument.
+  void set_num_depth(int d);
   void set_depth_sampling(DepthSampling s) { config_.depth_sampling = s; }
   void set_feature_warp(FeatureWarp w) { config_.feature_warp = w; }
 
-  FeatureNet feature{nullptr};
-  CostRegNet cost_regularization{nullptr};
-  RefineNet refine_network{nullptr};  // null unless config.refine
+  FeatureNet feature{nullptr};                // MVSNet only
+  CostRegNet cost_regularization{nullptr};    // MVSNet only
+  RefineNet refine_network{nullptr};          // null unless config.refine
+  SweepFeatureNet sweep_features{nullptr};    // sweep2d only
+  CostDecoder2D cost_decoder{nullptr};        // sweep2d only
+
+  // forward() of a sweep2d network; `times` (optional) receives its stages' wall time.
+  MvsOutput forward_sweep2d(const torch::Tensor& images, const torch::Tensor& proj, const torch::Tensor& depth_values,
+                            bool keep_prob_volume, MvsStageTimes* times = nullptr);
 
  private:
   MvsNetConfig config_;

@@ -113,7 +113,10 @@ struct TrainerConfig {
   // first_pass_loss_weight. Off (planes 0): one pass, as the paper.
   FinePassConfig fine;
   double first_pass_loss_weight = 0.5;
-  int map_divisor() const { return fine.enabled() ? fine.resolution_divisor : 4; }  // the loss's grid
+  // The loss's grid: the fine pass's, else the network's (MvsNetConfig::map_divisor).
+  int map_divisor(const MvsNetConfig& network) const {
+    return fine.enabled() ? fine.resolution_divisor : network.map_divisor();
+  }
   void validate() const;
 };
 
@@ -178,7 +181,7 @@ class Trainer {
   GradientSync gradient_sync_;
 };
 
-// The model's depth on a batch made with config.map_divisor(): one pass (MvsNetImpl::forward), or
+// The model's depth on a batch made with config.map_divisor(model's config): one pass (MvsNetImpl::forward), or
 // both passes of a coarse-to-fine run (coarse_to_fine_forward), with gradients unless disabled.
 MvsOutput training_forward(MvsNetImpl& model, const TrainingBatch& batch, const TrainerConfig& config,
                            bool keep_prob_volume);
