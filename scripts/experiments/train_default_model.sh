@@ -17,7 +17,10 @@
 #   environment: UMVS, STEPS (6000), THREADS (2), SEED (1), SCENES_PER_RECIPE (8), TEXTURES
 #   (installed | DIR[,DIR] | none), DEVICE (cpu | cuda), WIDTH x HEIGHT, NUM_DEPTH (160 x 128, 32),
 #   BATCH (1), INIT (start from this checkpoint instead of random weights), MAX_MINUTES (0: none),
-#   RENDER_JOBS (scenes rendered at once, 1), LR (1e-3), LR_SCHEDULE (constant | cosine), LR_MIN (0),
+#   NETWORK (mvsnet | sweep2d: the network of a new model; sweep2d defaults to 320 x 256 and 64
+#   planes), REAL_VIDEOS ("" | "hololens tum": those real videos' frames and poses trained on with
+#   the photometric loss, imported with a fixed 0.3-8 m range and without their depth; 7-Scenes is
+#   never trained on; REAL_VIDEO_FRAMES: the first N frames of each, 0 = all), RENDER_JOBS (scenes rendered at once, 1), LR (1e-3), LR_SCHEDULE (constant | cosine), LR_MIN (0),
 #   FEATURE_WARP (exact; mvsnet_pytorch only to reproduce models trained before the warp was fixed),
 #   RENDER_WIDTH x RENDER_HEIGHT (320 x 256: the rendered scenes' size), SUPERVISED_SHARE (0.75: the
 #   share of tuples from rendered scenes; the rest are templeRing's, photometric), MIN_ZOOM and
@@ -53,6 +56,14 @@ SEED="${SEED:-1}"
 SCENES_PER_RECIPE="${SCENES_PER_RECIPE:-8}"
 TEXTURES="${TEXTURES:-installed}"
 DEVICE="${DEVICE:-cpu}"
+NETWORK="${NETWORK:-mvsnet}"
+REAL_VIDEOS="${REAL_VIDEOS:-}"
+REAL_VIDEO_FRAMES="${REAL_VIDEO_FRAMES:-0}"
+if [ "$NETWORK" = sweep2d ]; then
+  WIDTH="${WIDTH:-320}"
+  HEIGHT="${HEIGHT:-256}"
+  NUM_DEPTH="${NUM_DEPTH:-64}"
+fi
 WIDTH="${WIDTH:-160}"
 HEIGHT="${HEIGHT:-128}"
 NUM_DEPTH="${NUM_DEPTH:-32}"
@@ -92,12 +103,36 @@ if [ -d "$SHARED/templeRing" ]; then
 else
   echo "[default-model] $SHARED/templeRing not found: supervised on rendered scenes only"
 fi
+# Real videos, label-free: frames and poses only. The importers read the sensor depth to set each
+# view's range and keep it in depth_gt/ for scoring; here every view gets the range a robot without
+# a depth sensor configures, and depth_gt/ is removed before training sees the folder.
+real_folders=()
+for video in $REAL_VIDEOS; do
+  dir="$WORK/data/$video"
+  if [ ! -f "$dir/pair.txt" ]; then
+    rm -rf "$dir"
+    base=(--out "$dir" --min-baseline 0.05 --max-baseline 0.3 --depth-range 0.3,8 --count "$REAL_VIDEO_FRAMES")
+    case "$video" in
+      hololens) "$UMVS" import dvmvs --data "$SHARED/hololens_kitchen/raw/hololens-dataset/000" "${base[@]}" >/dev/null ;;
+      tum) "$UMVS" import tum --data "$SHARED/tum_fr3_cabinet_kf/raw/data" --poses truth_cam_poses.txt --associate index \
+             --intrinsics "$SHARED/tum_fr3_cabinet_kf/raw/data/TUM3.yaml" "${base[@]}" >/dev/null ;;
+      *) echo "[default-model] REAL_VIDEOS: unknown video '$video' (hololens | tum; 7-Scenes is never trained on)" >&2; exit 1 ;;
+    esac
+  fi
+  rm -rf "$dir/depth_gt"
+  real_folders+=("$dir")
+done
+if ((${#real_folders[@]} > 0)); then
+  photometric_list="$(IFS=,; echo "${real_folders[*]}")"
+  [ -d "$SHARED/templeRing" ] && photometric_list="$WORK/data/templeRing,$photometric_list"
+  photometric=(--data "$photometric_list" --supervised-share "$SUPERVISED_SHARE")
+fi
 if ((${#photometric[@]} == 0)); then
   data=(--data "$supervised_list" --loss supervised)
 else
   data=("${photometric[@]}" --supervised-data "$supervised_list" --loss robust)
 fi
-start=()
+start=(--network "$NETWORK")
 [ -n "$INIT" ] && start=(--init "$INIT")
 
 resume=()

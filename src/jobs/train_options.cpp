@@ -9,6 +9,7 @@
 #include "unsup_mvs/core/depth_estimator.h"
 #include "unsup_mvs/core/geometry.h"
 #include "unsup_mvs/core/mvsnet.h"
+#include "unsup_mvs/io/checkpoint.h"
 
 namespace umvs {
 
@@ -80,6 +81,15 @@ PlaneCount training_plane_count(const TrainOptions& o, const std::optional<RunOp
     }
     return {planes.get<int>(), "as the run in --out was made"};
   }
+  // A network whose weights fix its planes (sweep2d) sweeps its own.
+  const std::string& start = o.was_given("eval-only") ? o.eval_only : o.init;
+  if (!start.empty()) {
+    const MvsNetConfig network = load_model(start, torch::kCPU).model->config();
+    if (network.planes_fixed_by_weights()) return {network.num_depth, "fixed by the network's weights"};
+  }
+  if (o.network == "sweep2d") {
+    return {kSweep2dDefaultPlanes, "default for a new sweep2d network (its weights fix the count; --num-depth to change)"};
+  }
   if (o.width == 0) {
     throw std::invalid_argument("--num-depth 0 follows --width; with --width 0 (each image's own size) give "
                                 "--num-depth (128 at 640 wide)");
@@ -89,6 +99,11 @@ PlaneCount training_plane_count(const TrainOptions& o, const std::optional<RunOp
 }
 
 }  // namespace
+
+std::string TrainOptions::depth_sampling_mode() const {
+  if (was_given("depth-sampling")) return depth_sampling;
+  return network == "sweep2d" ? "inverse_depth" : "depth";
+}
 
 std::string TrainOptions::batchnorm_mode() const {
   if (was_given("batchnorm")) return batchnorm;
@@ -111,6 +126,11 @@ void TrainOptions::validate() const {
     throw std::invalid_argument("--max-minutes must be >= 0 (0 = no limit), got " + option_text(max_minutes));
   }
   depth_sampling_from_string(depth_sampling);
+  const NetworkKind kind = network_kind_from_string(network);
+  if (kind != NetworkKind::kMvsNet && fine_planes > 0) {
+    throw std::invalid_argument("--fine-planes: a fine pass runs MVSNet twice; --network " + network +
+                                " maps at 1/2 of the input already");
+  }
   if (was_given("feature-warp")) feature_warp_from_string(feature_warp);
   if (was_given("against") && !was_given("eval-only")) {
     throw std::invalid_argument("--against is compared with the --eval-only checkpoint: give --eval-only too");
@@ -227,6 +247,9 @@ TrainingRunConfig training_run_config(const TrainOptions& options, const TrainSe
                                       std::ostream& messages) {
   TrainOptions o = options;  // as the run uses them
   o.num_depth = setup.planes.planes;
+  o.depth_sampling = o.depth_sampling_mode();
+  // The network is the --init checkpoint's: record that one.
+  if (!o.init.empty()) o.network = to_string(load_model(o.init, torch::kCPU).model->config().network);
   // An anchored run of a version before the 0.5 default recorded no floor (upgraded: 0), as one
   // made with 0: resumed without the option, it continues with that floor instead of being refused.
   const auto& recorded = setup.recorded;
@@ -250,7 +273,8 @@ TrainingRunConfig training_run_config(const TrainOptions& options, const TrainSe
   run.upgrade_record = upgrade_train_record;
   run.init = o.init;
   run.fine_tuned_share = o.fine_tuned_share;
-  run.new_model.depth_sampling = depth_sampling_from_string(o.depth_sampling);
+  run.new_model.network = network_kind_from_string(o.network);
+  run.new_model.depth_sampling = depth_sampling_from_string(o.depth_sampling_mode());
   run.new_model.input_normalization = input_normalization_from_string(o.input_normalization);
   if (o.was_given("feature-warp")) run.feature_warp = feature_warp_from_string(o.feature_warp);
   run.seed = static_cast<uint64_t>(o.seed);

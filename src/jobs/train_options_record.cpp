@@ -75,6 +75,7 @@ void visit_options(const TrainOptions& o, Visit&& visit) {
   visit("first-pass-loss-weight", o.first_pass_loss_weight);
   visit("depth-sampling", o.depth_sampling);
   visit("feature-warp", o.feature_warp);
+  visit("network", o.network);
   visit("steps", o.steps);
   visit("batch", o.batch);
   visit("micro-batch", o.micro_batch);
@@ -168,6 +169,7 @@ RunOptions with_later_options(RunOptions options) {
       {"fine-resolution", 4},
       {"first-pass-downscale", 1},
       {"first-pass-loss-weight", 0.5},
+      {"network", "mvsnet"},  // the 2-D network came later
   };
   for (const auto& entry : later.items()) {
     if (!options.contains(entry.key())) options[entry.key()] = entry.value();

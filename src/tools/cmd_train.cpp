@@ -158,7 +158,11 @@ UMVS_COMMAND(train, "unsupervised training / fine-tuning with the robust photome
             "--height multiples of 64), 1 = as given")
       .bind("first-pass-loss-weight", &o.first_pass_loss_weight,
             "coarse to fine: weight of the first pass's loss (its depth on the map's grid) against the map's")
-      .bind("depth-sampling", &o.depth_sampling, "depth | inverse_depth (new models only)")
+      .bind("network", &o.network,
+            "new models: mvsnet (3-D U-Net, maps at 1/4) | sweep2d (2-D encoder-decoder built for the CPU, maps "
+            "at 1/2, 64 planes; docs/training.md); --init and --resume keep the checkpoint's")
+      .bind("depth-sampling", &o.depth_sampling,
+            "depth | inverse_depth (new models only; default inverse_depth for --network sweep2d, else depth)")
       .bind("feature-warp", &o.feature_warp,
             "exact | mvsnet_pytorch: where the cost volume samples the source views (default: the --init "
             "model's; exact for new models)")

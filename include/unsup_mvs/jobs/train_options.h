@@ -54,7 +54,8 @@ struct TrainOptions {
   // Coarse to fine (TrainerConfig::fine): fine planes 0 = one pass.
   int fine_planes = 0, fine_resolution = 4, first_pass_downscale = 1;
   double fine_span = 4, first_pass_loss_weight = 0.5;
-  std::string depth_sampling = "depth", feature_warp;
+  std::string depth_sampling = "depth", feature_warp;  // sampling when not given: depth_sampling_mode()
+  std::string network = "mvsnet";  // of a new model: mvsnet | sweep2d
   // The optimisation.
   int steps = 10000, batch = 1, micro_batch = 0;
   std::string batchnorm = "train";  // when not given: batchnorm_mode()
@@ -83,6 +84,9 @@ struct TrainOptions {
   // statistics would average the two passes' volumes into one running mean that fits neither),
   // else train.
   std::string batchnorm_mode() const;
+  // --depth-sampling, else inverse_depth for a new sweep2d network (planes for 0.3-8 m rooms) and
+  // depth otherwise.
+  std::string depth_sampling_mode() const;
   bool anchored() const { return self_training() && anchor_unconfirmed; }
 
   // Every check that needs no file, before anything is read or written. Throws
