@@ -8,7 +8,7 @@
 //    over the sources: one number per plane, [B,D,h,w] (MVSNet's variance keeps 32 per plane).
 //  - Regularisation: the D planes are channels of a 2-D encoder-decoder (four scales, 1/4 to
 //    1/32, 32-128 channels), with the reference's context features concatenated in and its 1/2
-//    features as a skip;
+//    features as a skip; the cost itself, scaled, is added to the logits (a matching prior);
 //    it decodes to D logits per pixel at 1/2 of the input.
 //  - Depth and confidence as MVSNet: softmax over the planes, soft-argmin, and the probability
 //    mass of the 4 planes around the estimate.
