@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "cli_test_util.h"
 #include "test_util.h"
 #include "training_test_fixtures.h"
 #include "unsup_mvs/core/depth_estimator.h"
@@ -253,6 +254,11 @@ TEST(SweepNetTraining, NewRunResumesAndInitKeepsThePlanes) {
   EXPECT_NE(test::run(common + " --network sweep2d --fine-planes 8 --out " + out + "/e --steps 1"), 0);
   EXPECT_NE(test::run(common + " --network unet --out " + out + "/f --steps 1"), 0);
   EXPECT_FALSE(std::filesystem::exists(out + "/d/last.pt"));
+  // umvs bench times it at its own planes unless told otherwise.
+  const auto bench = test::run_umvs("bench --case network --checkpoint " + out + "/a/last.pt --width 64 --height 64 "
+                                    "--runs 1 --warmup 0 --threads 1 --json", "2>/dev/null");
+  ASSERT_EQ(bench.status, 0) << bench.output;
+  EXPECT_NE(bench.output.find("\"num_depth\":" + std::to_string(kSweep2dDefaultPlanes)), std::string::npos) << bench.output;
 }
 
 }  // namespace

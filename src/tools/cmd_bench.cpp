@@ -156,6 +156,7 @@ int bench_fusion(const Args& args, const torch::Device& device) {
 struct PipelineTimes {
   std::vector<double> total, network, first_pass, completion, features, volume, unet, fine_pass;
   int extra_passes = 0, width = 0, height = 0;
+  const char* regularizer = "3-D U-Net";
 };
 
 // One estimate, recorded in `t` unless it is a warmup run.
@@ -178,6 +179,10 @@ void time_estimate(DepthEstimator& estimator, const std::vector<ViewInput>& view
   t.extra_passes += map.per_source_passes ? 1 : 0;
   t.width = map.camera.width;
   t.height = map.camera.height;
+}
+
+const char* regularizer_name(const MvsNetConfig& c) {
+  return c.network == NetworkKind::kSweep2d ? "2-D encoder-decoder" : "3-D U-Net";
 }
 
 std::pair<double, double> p50_p90(const std::vector<double>& v) { return {percentile(v, 50), percentile(v, 90)}; }
@@ -205,7 +210,7 @@ void print_pipeline_block(const std::string& header, const PipelineTimes& t, boo
   line("network, every pass", t.network);
   line("  features", t.features);
   line("  cost volume", t.volume);
-  line("  3-D U-Net", t.unet);
+  line((std::string("  ") + t.regularizer).c_str(), t.unet);
   if (fine) {
     line("  of the last two, the fine pass", t.fine_pass);
     line("network, first pass", t.first_pass);
@@ -259,6 +264,8 @@ int bench_pipeline(const Args& args, const torch::Device& device) {
     against = std::make_unique<DepthEstimator>(against_model.model, device, against_cfg);
   }
   PipelineTimes times, against_times;
+  times.regularizer = regularizer_name(model.model->config());
+  if (against) against_times.regularizer = regularizer_name(against->model()->config());
   for (int r = 0; r < warmup + runs; ++r) {
     const size_t ref = static_cast<size_t>(r) % scene.views.size();
     std::vector<ViewInput> views{{scene.views[ref].image, scene.views[ref].camera}};
@@ -351,7 +358,8 @@ UMVS_COMMAND(bench, "time and memory of the network on synthetic input") {
     std::cerr << "warning: the parallel loops of this build run on " << used << " of " << torch::get_num_threads()
               << " threads (built without OpenMP? see UMVS_OPENMP in CMakeLists.txt)\n";
   }
-  const int W = args.integer("width"), H = args.integer("height"), D = args.integer("num-depth"), V = args.integer("views");
+  const int W = args.integer("width"), H = args.integer("height"), V = args.integer("views");
+  int D = args.integer("num-depth");
   const int runs = args.integer("runs");
   if (runs < 1) throw std::invalid_argument("--runs must be >= 1");
   if (!args.str("against").empty() && args.str("case") != "pipeline") {
@@ -376,6 +384,7 @@ UMVS_COMMAND(bench, "time and memory of the network on synthetic input") {
     model = loaded.model;
     if (loaded.format == "mvsnet_pytorch") model->set_feature_warp(cfg.feature_warp);
     cfg = model->config();
+    if (cfg.planes_fixed_by_weights() && !args.given("num-depth")) D = cfg.num_depth;  // the weights' own count
   }
   model->to(device);
   umvs::FastMvsNet fast(model);
@@ -454,7 +463,7 @@ UMVS_COMMAND(bench, "time and memory of the network on synthetic input") {
               << " GFLOP/s, peak RSS " << std::setprecision(0) << memory_mib << " MiB, " << faults_per_run
               << " minor page faults per run\n";
     if (have_stages) {
-      const char* regularizer = cfg.network == umvs::NetworkKind::kSweep2d ? "2-D encoder-decoder" : "3-D U-Net";
+      const char* regularizer = umvs::regularizer_name(cfg);
       std::cout << std::setprecision(4) << "  stages (median s): features " << umvs::summarize(features_s).median
                 << ", cost volume " << umvs::summarize(volume_s).median << ", " << regularizer << " "
                 << umvs::summarize(unet_s).median
