@@ -19,7 +19,7 @@ PACKAGES=(
   python3-catkin-pkg python3-genmsg python3-gencpp python3-genpy python3-empy
   ros-std-msgs libstd-msgs-dev ros-sensor-msgs libsensor-msgs-dev
   ros-geometry-msgs libgeometry-msgs-dev ros-diagnostic-msgs libdiagnostic-msgs-dev
-  ros-nav-msgs libnav-msgs-dev python3-nav-msgs
+  ros-nav-msgs libnav-msgs-dev python3-nav-msgs ros-map-msgs libmap-msgs-dev python3-map-msgs
   ros-std-srvs libstd-srvs-dev ros-tf2-msgs libtf2-msgs-dev ros-rosgraph-msgs
   # ROS 1 libraries the nodes use
   libroscpp-dev libnodeletlib-dev libnodelet-dev pluginlib-dev

@@ -4,6 +4,7 @@
 // after the optional ~filter/ stages, `cloud_increment` the points each depth estimate adds, as
 // soon as they exist. save_cloud writes .ply or .pcd (by extension) only inside ~save_dir.
 // The thresholds can be tuned live (dynamic_reconfigure, cfg/Fusion.cfg). See docs/ros.md.
+#include <map_msgs/OccupancyGridUpdate.h>
 #include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
 #include <nav_msgs/OccupancyGrid.h>
@@ -69,6 +70,39 @@ nav_msgs::OccupancyGrid to_grid_msg(const umvs::OccupancyGrid2D& grid, const std
   return msg;
 }
 
+// The smallest window of `now` that differs from `before` (same size), as costmap_2d's static
+// layer takes it on <map>_updates; empty (0 x 0) when nothing changed, so that its stamp still tells
+// which estimates the grid includes.
+map_msgs::OccupancyGridUpdate changed_window(const umvs::OccupancyGrid2D& before, const umvs::OccupancyGrid2D& now,
+                                             const ros::Time& stamp, const std::string& frame) {
+  map_msgs::OccupancyGridUpdate update;
+  update.header.frame_id = frame;
+  update.header.stamp = stamp;
+  int x0 = now.width, y0 = now.height, x1 = -1, y1 = -1;
+  for (int y = 0; y < now.height; ++y) {
+    for (int x = 0; x < now.width; ++x) {
+      const size_t i = static_cast<size_t>(y) * now.width + x;
+      if (before.cells[i] == now.cells[i]) continue;
+      x0 = std::min(x0, x);
+      x1 = std::max(x1, x);
+      y0 = std::min(y0, y);
+      y1 = std::max(y1, y);
+    }
+  }
+  if (x1 < 0) return update;
+  update.x = x0;
+  update.y = y0;
+  update.width = static_cast<uint32_t>(x1 - x0 + 1);
+  update.height = static_cast<uint32_t>(y1 - y0 + 1);
+  update.data.clear();
+  update.data.reserve(static_cast<size_t>(update.width) * update.height);
+  for (int y = y0; y <= y1; ++y) {
+    const auto row = now.cells.begin() + static_cast<std::ptrdiff_t>(y) * now.width;
+    update.data.insert(update.data.end(), row + x0, row + x1 + 1);
+  }
+  return update;
+}
+
 
 }  // namespace
 
@@ -83,6 +117,7 @@ class FusionNodelet : public nodelet::Nodelet {
       world_frame_ = c.world_frame;
       save_dir_ = c.save_dir;
       default_save_path_ = c.default_save_path;
+      full_grid_period_ = c.full_grid_period;
       max_image_pixels_ = c.max_image_pixels;
       filters_ = c.filters;
       umvs::make_directories(save_dir_);
@@ -96,7 +131,15 @@ class FusionNodelet : public nodelet::Nodelet {
     cloud_pub_ = nh.advertise<sensor_msgs::PointCloud2>("cloud", 1, true);
     increment_pub_ = nh.advertise<sensor_msgs::PointCloud2>("cloud_increment", 5);
     if (occupancy_) {
-      grid_pub_ = nh.advertise<nav_msgs::OccupancyGrid>("occupancy_grid", 1, true);
+      // A new subscriber gets the latched grid at once and a current whole one at the next publication.
+      grid_pub_ = nh.advertise<nav_msgs::OccupancyGrid>(
+          "occupancy_grid", 1,
+          [this](const ros::SingleSubscriberPublisher&) {
+            std::lock_guard<std::mutex> lock(mutex_);
+            whole_grid_due_ = dirty_ = true;
+          },
+          ros::SubscriberStatusCallback(), ros::VoidConstPtr(), /*latch=*/true);
+      grid_update_pub_ = nh.advertise<map_msgs::OccupancyGridUpdate>("occupancy_grid_updates", 10);
       save_map_srv_ = pnh.advertiseService("save_map", &FusionNodelet::onSaveMap, this);
     }
     estimate_sub_ = nh.subscribe("depth_estimate", 5, &FusionNodelet::onEstimate, this);
@@ -162,7 +205,7 @@ class FusionNodelet : public nodelet::Nodelet {
       const auto t0 = ros::WallTime::now();
       const umvs::PointCloud added = fusion_->add(view);
       // The octree takes every confident pixel: free space needs the rays, not only agreed points.
-      if (occupancy_) occupancy_->integrate(view.depth, view.confidence, view.camera);
+      if (occupancy_) warn_about(occupancy_->integrate(view.depth, view.confidence, view.camera), view.camera);
       ++estimates_;
       if (!added.empty() && increment_pub_.getNumSubscribers() > 0) {
         increment_pub_.publish(to_cloud_msg(added, world_frame_, msg->header.stamp));
@@ -181,9 +224,30 @@ class FusionNodelet : public nodelet::Nodelet {
     }
   }
 
+  // One warning when a problem starts (not one per depth map), one line when it ends.
+  void warn_about(const umvs::OccupancyIntegration& r, const umvs::Camera& camera) {
+    const auto& m = node_.occupancy_map;
+    if (r.camera_outside && !camera_outside_) {
+      const Eigen::Vector3d c = camera.center();
+      NODELET_WARN("fusion: a camera at (%.1f, %.1f, %.1f) m is outside the occupancy map's extent [%.1f..%.1f] x "
+                   "[%.1f..%.1f] x [%.1f..%.1f] m (~occupancy/extent): its depth maps are left out of the map (bad "
+                   "pose, or a map that should be larger)", c.x(), c.y(), c.z(), m.min_x, m.max_x, m.min_y, m.max_y,
+                   m.min_z, m.max_z);
+    } else if (!r.camera_outside && camera_outside_) {
+      NODELET_INFO("fusion: the camera is back inside the occupancy map's extent");
+    }
+    camera_outside_ = r.camera_outside;
+    if (r.at_node_cap && !at_node_cap_) {
+      NODELET_WARN("fusion: the occupancy map reached ~occupancy/max_nodes (%ld nodes): new space is no longer "
+                   "mapped, known cells still update", static_cast<long>(m.max_nodes));
+    }
+    at_node_cap_ = at_node_cap_ || r.at_node_cap;
+  }
+
   void onTimer(const ros::WallTimerEvent&) {
     umvs::PointCloud map;
     umvs::OccupancyGrid2D grid;
+    bool whole_grid = false;
     double grid_z = 0.0;  // node_ is read under the lock: onReconfigure replaces it
     ros::Time stamp;
     {
@@ -191,11 +255,13 @@ class FusionNodelet : public nodelet::Nodelet {
       if (!dirty_) return;
       map = fusion_->cloud();
       if (occupancy_) grid = occupancy_->project(node_.grid_min_z, node_.grid_max_z);
+      whole_grid = whole_grid_due_;
+      whole_grid_due_ = false;
       grid_z = node_.grid_min_z;
       stamp = last_stamp_;
       dirty_ = false;
     }
-    if (occupancy_) grid_pub_.publish(to_grid_msg(grid, world_frame_, stamp, grid_z));
+    if (occupancy_) publish_grid(grid, stamp, grid_z, whole_grid);
     // Filtered outside the lock: estimates keep being fused meanwhile.
     try {
       cloud_pub_.publish(to_cloud_msg(filtered(map), world_frame_, stamp));
@@ -279,6 +345,23 @@ class FusionNodelet : public nodelet::Nodelet {
     return true;
   }
 
+  // The whole grid when it is new, asked for (a new subscriber) or its period is due, else the
+  // window that changed since the last publication.
+  void publish_grid(const umvs::OccupancyGrid2D& grid, const ros::Time& stamp, double z, bool whole) {
+    const auto now = ros::WallTime::now();
+    const bool same_shape = published_grid_.width == grid.width && published_grid_.height == grid.height &&
+                            published_grid_.resolution == grid.resolution && published_grid_.origin_x == grid.origin_x &&
+                            published_grid_.origin_y == grid.origin_y && published_grid_z_ == z;
+    if (whole || !same_shape || (now - last_full_grid_).toSec() >= full_grid_period_) {
+      grid_pub_.publish(to_grid_msg(grid, world_frame_, stamp, z));
+      last_full_grid_ = now;
+    } else {
+      grid_update_pub_.publish(changed_window(published_grid_, grid, stamp, world_frame_));
+    }
+    published_grid_ = grid;
+    published_grid_z_ = z;
+  }
+
   bool onReset(unsup_mvs::ResetFusion::Request&, unsup_mvs::ResetFusion::Response& res) {
     std::lock_guard<std::mutex> lock(mutex_);
     const size_t before = fusion_->cloud().size();
@@ -304,7 +387,13 @@ class FusionNodelet : public nodelet::Nodelet {
   long estimates_ = 0;
   bool dirty_ = false;
   ros::Time last_stamp_;
-  ros::Publisher cloud_pub_, increment_pub_, grid_pub_;
+  ros::Publisher cloud_pub_, increment_pub_, grid_pub_, grid_update_pub_;
+  // The grid as last published (timer thread only), when it went out whole, and the warnings' states.
+  umvs::OccupancyGrid2D published_grid_;
+  double published_grid_z_ = 0.0, full_grid_period_ = FusionNodeConfig{}.full_grid_period;
+  ros::WallTime last_full_grid_;
+  bool camera_outside_ = false, at_node_cap_ = false;
+  bool whole_grid_due_ = false;  // under mutex_: a subscriber connected
   ros::Subscriber estimate_sub_;
   ros::ServiceServer save_srv_, reset_srv_, save_map_srv_;
   ros::WallTimer timer_;

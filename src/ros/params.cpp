@@ -7,6 +7,8 @@
 #include <cstdlib>
 #include <filesystem>
 #include <stdexcept>
+#include <tuple>
+#include <vector>
 
 #include "unsup_mvs/core/device.h"
 #include "unsup_mvs/io/cloud_file.h"
@@ -138,6 +140,9 @@ void FusionNodeConfig::validate() const {
   fusion.validate();
   occupancy_map.validate();
   if (!(grid_max_z > grid_min_z)) throw std::invalid_argument("occupancy/grid_max_z must be above occupancy/grid_min_z");
+  if (!(full_grid_period > 0) || !std::isfinite(full_grid_period)) {
+    throw std::invalid_argument("occupancy/full_grid_period must be > 0 seconds");
+  }
   umvs::parse_device(device);
   if (max_image_pixels < 1) throw std::invalid_argument("max_image_pixels must be >= 1");
   if (window < 1) throw std::invalid_argument("window must be >= 1");
@@ -181,6 +186,20 @@ FusionNodeConfig fusion_node_config_from_ros(const ros::NodeHandle& nh) {
   occupancy.param("prob_miss", c.occupancy_map.prob_miss, c.occupancy_map.prob_miss);
   occupancy.param("min_confidence", c.occupancy_map.min_confidence, c.occupancy_map.min_confidence);
   occupancy.param("pixel_stride", c.occupancy_map.pixel_stride, c.occupancy_map.pixel_stride);
+  int max_nodes = static_cast<int>(c.occupancy_map.max_nodes);  // XmlRpc integers are 32-bit
+  occupancy.param("max_nodes", max_nodes, max_nodes);
+  c.occupancy_map.max_nodes = max_nodes;
+  std::vector<double> extent;
+  if (occupancy.getParam("extent", extent)) {
+    if (extent.size() != 6) {
+      throw std::invalid_argument("occupancy/extent must be [min_x, min_y, min_z, max_x, max_y, max_z] (metres, world "
+                                  "frame), got " + std::to_string(extent.size()) + " numbers");
+    }
+    auto& m = c.occupancy_map;
+    std::tie(m.min_x, m.min_y, m.min_z, m.max_x, m.max_y, m.max_z) =
+        std::tie(extent[0], extent[1], extent[2], extent[3], extent[4], extent[5]);
+  }
+  occupancy.param("full_grid_period", c.full_grid_period, c.full_grid_period);
   occupancy.param("grid_min_z", c.grid_min_z, c.grid_min_z);
   occupancy.param("grid_max_z", c.grid_max_z, c.grid_max_z);
   c.validate();

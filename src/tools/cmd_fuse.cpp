@@ -8,6 +8,7 @@
 #include <iostream>
 #include <map>
 #include <sstream>
+#include <tuple>
 
 #include "unsup_mvs/core/device.h"
 #include "unsup_mvs/core/fusion.h"
@@ -81,12 +82,13 @@ umvs::FusionView load_view(const Layout& l, int id) {
   return v;
 }
 
-std::vector<double> parse_bbox(const std::string& s) {
+// A box given as xmin,ymin,zmin,xmax,ymax,zmax to `option`.
+std::vector<double> parse_box(const std::string& s, const std::string& option) {
   std::vector<double> b;
   std::stringstream ss(s);
   for (std::string item; std::getline(ss, item, ',');) b.push_back(std::stod(item));
   if (b.size() != 6 || b[0] >= b[3] || b[1] >= b[4] || b[2] >= b[5]) {
-    throw std::invalid_argument("--bbox needs xmin,ymin,zmin,xmax,ymax,zmax with min < max, got '" + s + "'");
+    throw std::invalid_argument("--" + option + " needs xmin,ymin,zmin,xmax,ymax,zmax with min < max, got '" + s + "'");
   }
   return b;
 }
@@ -111,6 +113,9 @@ UMVS_COMMAND(fuse, "fuse depth maps into one consistent point cloud (PLY or PCD)
                        "or an occupancy map, .bt (OctoMap: confident pixels ray-cast from their cameras)")
       .option("octomap-resolution", umvs::OccupancyMapConfig{}.resolution, ".bt: leaf edge (metres)")
       .option("octomap-max-range", umvs::OccupancyMapConfig{}.max_range, ".bt: rays cut at this range (metres)")
+      .option("octomap-extent", "",
+              ".bt: the map's box MIN_X,MIN_Y,MIN_Z,MAX_X,MAX_Y,MAX_Z in metres (default: a building floor, "
+              "-25,-25,-2,25,25,4); nothing outside is mapped")
       .option("min-confidence", fusion_defaults.min_confidence, "pixels below this confidence are ignored")
       .option("max-reprojection", fusion_defaults.max_reprojection_px,
               "max reprojection error after the round trip (pixels)")
@@ -162,9 +167,14 @@ UMVS_COMMAND(fuse, "fuse depth maps into one consistent point cloud (PLY or PCD)
   occupancy_cfg.resolution = args.real("octomap-resolution");
   occupancy_cfg.max_range = args.real("octomap-max-range");
   occupancy_cfg.min_confidence = cfg.min_confidence;
+  if (!args.str("octomap-extent").empty()) {
+    const std::vector<double> box = parse_box(args.str("octomap-extent"), "octomap-extent");
+    std::tie(occupancy_cfg.min_x, occupancy_cfg.min_y, occupancy_cfg.min_z, occupancy_cfg.max_x, occupancy_cfg.max_y,
+             occupancy_cfg.max_z) = std::tie(box[0], box[1], box[2], box[3], box[4], box[5]);
+  }
   if (occupancy) occupancy_cfg.validate();
   else umvs::cloud_file_format(args.str("out"));  // a wrong extension is refused before any work
-  const auto bbox = args.given("bbox") ? parse_bbox(args.str("bbox")) : std::vector<double>{};
+  const auto bbox = args.given("bbox") ? parse_box(args.str("bbox"), "bbox") : std::vector<double>{};
 
   const Layout layout = find_layout(args.str("depth"), args.str("data"));
   if (!fs::exists(layout.pair_file)) throw std::runtime_error("no pair file " + layout.pair_file);
@@ -201,8 +211,16 @@ UMVS_COMMAND(fuse, "fuse depth maps into one consistent point cloud (PLY or PCD)
   if (occupancy) {  // an OctoMap: every confident pixel a ray from its camera, no consistency test
     const auto t = std::chrono::steady_clock::now();
     umvs::OccupancyMap map(occupancy_cfg);
-    int64_t rays = 0;
-    for (const auto& v : views) rays += map.integrate(v.depth, v.confidence, v.camera);
+    int64_t rays = 0, outside = 0;
+    for (const auto& v : views) {
+      const umvs::OccupancyIntegration r = map.integrate(v.depth, v.confidence, v.camera);
+      rays += r.rays;
+      outside += r.camera_outside;
+    }
+    if (outside > 0) {
+      std::cerr << "warning: " << outside << " of " << views.size()
+                << " views have their camera outside --octomap-extent and were left out of the map\n";
+    }
     map.save(args.str("out"));
     std::printf("occupancy map of %zu views (%lld rays, %.3g m leaves) in %.2f s: %zu occupied, %zu free leaves; wrote %s\n",
                 views.size(), static_cast<long long>(rays), occupancy_cfg.resolution,

@@ -1,15 +1,19 @@
 // rostest for the fusion node: depth estimates of a plane seen by cameras moving along x become a
 // PointCloud2 on the plane (frame, stamp, PCL fields checked); save_cloud writes a PLY and a PCD
 // that PCL opens, with the same points, refuses other extensions and never replaces a good file
-// with nothing; reset clears; an object that leaves is removed from the cloud and the grid
+// with nothing; reset clears; an object that leaves is removed from the cloud and the grid (kept, as
+// a costmap keeps it, from the latched whole and the changed windows of occupancy_grid_updates)
 // while the plane behind it keeps its points; bad estimates (another world frame, NaN pose, wrong depth encoding)
 // are logged and skipped.
+#include <map_msgs/OccupancyGridUpdate.h>
 #include <nav_msgs/OccupancyGrid.h>
 #include <octomap/OcTree.h>
 #include <pcl/io/pcd_io.h>
 #include <sensor_msgs/PointCloud2.h>
 #include <sensor_msgs/point_cloud2_iterator.h>
 #include <torch/torch.h>
+
+#include <boost/make_shared.hpp>
 
 #include <algorithm>
 #include <cmath>
@@ -38,6 +42,34 @@ using umvs_test::Request;
 unsup_mvs::DepthEstimate make_estimate(uint32_t id, double x) {
   return umvs_test::plane_estimate(id, x, "cam", {200, 0, 0});
 }
+
+// The grid as costmap_2d's static layer keeps it: the latched whole, then each changed window
+// written into it (callbacks run in wait_for's spinOnce, on this thread).
+struct GridListener {
+  explicit GridListener(ros::NodeHandle& nh) {
+    whole = nh.subscribe<nav_msgs::OccupancyGrid>("/occupancy_grid", 5, [this](const nav_msgs::OccupancyGridConstPtr& m) {
+      grid = boost::make_shared<nav_msgs::OccupancyGrid>(*m);
+      ++wholes;
+    });
+    windows = nh.subscribe<map_msgs::OccupancyGridUpdate>(
+        "/occupancy_grid_updates", 50, [this](const map_msgs::OccupancyGridUpdateConstPtr& u) {
+          // Before a whole grid, or older than it (published before it, arriving after): in it already.
+          if (!grid || u->header.stamp < grid->header.stamp) return;
+          ++updates;
+          EXPECT_LE(u->x + u->width, grid->info.width);
+          EXPECT_LE(u->y + u->height, grid->info.height);
+          EXPECT_EQ(u->data.size(), static_cast<size_t>(u->width) * u->height);
+          for (uint32_t j = 0; j < u->height; ++j) {
+            std::copy_n(u->data.begin() + j * u->width, u->width,
+                        grid->data.begin() + (u->y + j) * grid->info.width + u->x);
+          }
+          grid->header.stamp = u->header.stamp;
+        });
+  }
+  boost::shared_ptr<nav_msgs::OccupancyGrid> grid;
+  int wholes = 0, updates = 0;
+  ros::Subscriber whole, windows;
+};
 
 class FusionTest : public ::testing::Test {
  protected:
@@ -162,9 +194,9 @@ TEST_F(FusionTest, PlaneBecomesACloudAndIsSaved) {
 // where the cameras saw the plane, in the world frame; save_map writes a .bt octomap reads, only
 // inside ~save_dir.
 TEST_F(FusionTest, OccupancyGridAndOctoMap) {
-  nav_msgs::OccupancyGridConstPtr grid;
-  ros::Subscriber grid_sub = nh_.subscribe<nav_msgs::OccupancyGrid>(
-      "/occupancy_grid", 5, [&](const nav_msgs::OccupancyGridConstPtr& m) { grid = m; });
+  GridListener listener(nh_);
+  const auto& grid = listener.grid;
+  ASSERT_TRUE(wait_for([&] { return grid != nullptr; }, 10.0));
   ros::Time last_stamp;
   for (uint32_t i = 0; i < 5; ++i) {
     const auto e = make_estimate(20 + i, 0.1 * i);
@@ -176,6 +208,11 @@ TEST_F(FusionTest, OccupancyGridAndOctoMap) {
   EXPECT_EQ(grid->header.frame_id, "world");
   EXPECT_FLOAT_EQ(grid->info.resolution, 0.05f);
   ASSERT_EQ(grid->data.size(), static_cast<size_t>(grid->info.width) * grid->info.height);
+  // The extent's footprint (the default 50 x 50 m floor), mostly never seen: unknown.
+  EXPECT_EQ(grid->info.width, 1000u);
+  EXPECT_EQ(grid->info.height, 1000u);
+  EXPECT_DOUBLE_EQ(grid->info.origin.position.x, -25.0);
+  EXPECT_GT(std::count(grid->data.begin(), grid->data.end(), int8_t{-1}), 900000);
   // The cameras (x 0 .. 0.4, 64 x 48 px at f = 50) see the plane z = 3 over x -1.92 .. 2.32, y -1.44 .. 1.44.
   int occupied = 0, outside = 0;
   double min_x = 1e9, max_x = -1e9, min_y = 1e9, max_y = -1e9;
@@ -238,9 +275,9 @@ unsup_mvs::DepthEstimate estimate_with_object(uint32_t id, double x) {
 
 TEST_F(FusionTest, AnObjectThatLeavesIsRemovedFromTheCloudAndTheGrid) {
   umvs_test::RosoutCapture log(nh_);
-  nav_msgs::OccupancyGridConstPtr grid;
-  ros::Subscriber grid_sub = nh_.subscribe<nav_msgs::OccupancyGrid>(
-      "/occupancy_grid", 5, [&](const nav_msgs::OccupancyGridConstPtr& m) { grid = m; });
+  GridListener listener(nh_);
+  const auto& grid = listener.grid;
+  ASSERT_TRUE(wait_for([&] { return grid != nullptr; }, 10.0));
   // Live: the grid's height band around the object, and a ray through every pixel so that each of
   // the object's 5 cm cells is crossed in every later look (restored at the end).
   reconfigure("/fusion", Request().set("occupancy_grid_min_z", 1.9).set("occupancy_grid_max_z", 2.1).set(
@@ -285,6 +322,7 @@ TEST_F(FusionTest, AnObjectThatLeavesIsRemovedFromTheCloudAndTheGrid) {
               plane.size());
   EXPECT_EQ(points(true).size(), 0u);
   EXPECT_EQ(occupied_cells(), 0);
+  EXPECT_GT(listener.updates, 0) << "the grid followed through its changed windows";
   EXPECT_GE(static_cast<double>(plane_kept), 0.99 * plane.size());
   reconfigure("/fusion", Request().set("occupancy_grid_min_z", 2.8).set("occupancy_grid_max_z", 3.2).set(
                              "occupancy_pixel_stride", 2));
@@ -300,6 +338,10 @@ TEST_F(FusionTest, BadEstimatesAreLoggedAndSkipped) {
   auto nan_pose = make_estimate(51, 0.0);
   nan_pose.pose.position.z = std::nan("");
   EXPECT_TRUE(umvs_test::publish_until_logged(estimate_pub_, nan_pose, log, "pose has non-finite values", 10.0))
+      << log.all();
+  // A pose 1.5 km away (a bad fix): its rays stay out of the occupancy map, with one warning.
+  auto far_away = make_estimate(53, 1500.0);
+  EXPECT_TRUE(umvs_test::publish_until_logged(estimate_pub_, far_away, log, "outside the occupancy map's extent", 10.0))
       << log.all();
   auto wrong_depth = make_estimate(52, 0.0);
   wrong_depth.depth.encoding = "mono8";

@@ -79,6 +79,9 @@ struct FusionNodeConfig {
     return c;
   }();
   double grid_min_z = 0.1, grid_max_z = 1.5;
+  // The whole grid is republished (latched) at most this often, in seconds; the changed window goes
+  // out on occupancy_grid_updates at every publish.
+  double full_grid_period = 10.0;
   void validate() const;
 };
 FusionNodeConfig fusion_node_config_from_ros(const ros::NodeHandle& nh);
