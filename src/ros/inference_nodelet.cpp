@@ -35,6 +35,7 @@
 #include "unsup_mvs/io/input_limits.h"
 #include "unsup_mvs/io/model_check.h"
 #include "unsup_mvs/io/plane_count.h"
+#include "unsup_mvs/ros/depth_camera_outputs.h"
 #include "unsup_mvs/ros/nodelets.h"
 #include "unsup_mvs/ros/live_settings.h"
 #include "unsup_mvs/ros/params.h"
@@ -128,8 +129,7 @@ class InferenceNodelet : public nodelet::Nodelet {
       confidence_pub_ = it_->advertise("confidence", 2, it_connect, it_connect);
       // The depth map as a standard depth camera (REP 118) with the reference's colour beside it:
       // what depth_image_proc, rtabmap and other ROS consumers take.
-      depth_camera_pub_ = it_->advertiseCamera("depth/image", 2, it_connect, it_connect, connect, connect);
-      depth_rgb_pub_ = it_->advertise("depth/rgb", 2, it_connect, it_connect);
+      depth_camera_ = std::make_unique<DepthCameraOutputs>(*it_, it_connect, connect);
     }
     diagnostics_pub_ = nh.advertise<diagnostic_msgs::DiagnosticArray>("/diagnostics", 5);
     // reload_model has its own queue and thread: a slow or stuck load never holds up the keyframe
@@ -172,8 +172,7 @@ class InferenceNodelet : public nodelet::Nodelet {
   void updateSubscription() {
     std::lock_guard<std::mutex> lock(connect_mutex_);
     const bool wanted = estimate_pub_.getNumSubscribers() > 0 || depth_pub_.getNumSubscribers() > 0 ||
-                        confidence_pub_.getNumSubscribers() > 0 || depth_camera_pub_.getNumSubscribers() > 0 ||
-                        depth_rgb_pub_.getNumSubscribers() > 0;
+                        confidence_pub_.getNumSubscribers() > 0 || (depth_camera_ && depth_camera_->has_subscribers());
     if (wanted && !keyframes_sub_) {
       keyframes_sub_ = getNodeHandle().subscribe("keyframes", static_cast<uint32_t>(pending_->capacity()),
                                                &InferenceNodelet::onKeyframes, this);
@@ -263,11 +262,7 @@ class InferenceNodelet : public nodelet::Nodelet {
     estimate_pub_.publish(out);
     if (depth_pub_.getNumSubscribers() > 0) depth_pub_.publish(out.depth);
     if (confidence_pub_.getNumSubscribers() > 0) confidence_pub_.publish(out.confidence);
-    if (depth_camera_pub_.getNumSubscribers() > 0) {
-      depth_camera_pub_.publish(umvs::depth_camera_image_msg(map.depth, map.confidence, depth_camera_min_confidence_, header),
-                                out.camera_info);
-    }
-    if (depth_rgb_pub_.getNumSubscribers() > 0) depth_rgb_pub_.publish(out.image);
+    depth_camera_->publish(map.depth, map.confidence, depth_camera_min_confidence_, out.image, out.camera_info);
 
     const double total = (ros::WallTime::now() - t0).toSec();
     const double latency = (ros::Time::now() - header.stamp).toSec();
@@ -486,8 +481,8 @@ class InferenceNodelet : public nodelet::Nodelet {
   std::mutex connect_mutex_;
   std::unique_ptr<image_transport::ImageTransport> it_;
   ros::Publisher estimate_pub_, diagnostics_pub_;
-  image_transport::Publisher depth_pub_, confidence_pub_, depth_rgb_pub_;
-  image_transport::CameraPublisher depth_camera_pub_;
+  image_transport::Publisher depth_pub_, confidence_pub_;
+  std::unique_ptr<DepthCameraOutputs> depth_camera_;
   ros::Subscriber keyframes_sub_;
   ros::ServiceServer reload_srv_;
   std::unique_ptr<ReconfigureServer<unsup_mvs::InferenceConfig>> reconfigure_;

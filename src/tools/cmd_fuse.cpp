@@ -113,6 +113,7 @@ UMVS_COMMAND(fuse, "fuse depth maps into one consistent point cloud (PLY or PCD)
                        "or an occupancy map, .bt (OctoMap: confident pixels ray-cast from their cameras)")
       .option("octomap-resolution", umvs::OccupancyMapConfig{}.resolution, ".bt: leaf edge (metres)")
       .option("octomap-max-range", umvs::OccupancyMapConfig{}.max_range, ".bt: rays cut at this range (metres)")
+      .option("octomap-pixel-stride", umvs::OccupancyMapConfig{}.pixel_stride, ".bt: every N-th depth pixel each way casts a ray")
       .option("octomap-extent", "",
               ".bt: the map's box MIN_X,MIN_Y,MIN_Z,MAX_X,MAX_Y,MAX_Z in metres (default: a building floor, "
               "-25,-25,-2,25,25,4); nothing outside is mapped")
@@ -166,6 +167,7 @@ UMVS_COMMAND(fuse, "fuse depth maps into one consistent point cloud (PLY or PCD)
   umvs::OccupancyMapConfig occupancy_cfg;
   occupancy_cfg.resolution = args.real("octomap-resolution");
   occupancy_cfg.max_range = args.real("octomap-max-range");
+  occupancy_cfg.pixel_stride = args.integer("octomap-pixel-stride");
   occupancy_cfg.min_confidence = cfg.min_confidence;
   if (!args.str("octomap-extent").empty()) {
     const std::vector<double> box = parse_box(args.str("octomap-extent"), "octomap-extent");

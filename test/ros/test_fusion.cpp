@@ -278,10 +278,10 @@ TEST_F(FusionTest, AnObjectThatLeavesIsRemovedFromTheCloudAndTheGrid) {
   GridListener listener(nh_);
   const auto& grid = listener.grid;
   ASSERT_TRUE(wait_for([&] { return grid != nullptr; }, 10.0));
-  // Live: the grid's height band around the object, and a ray through every pixel so that each of
-  // the object's 5 cm cells is crossed in every later look (restored at the end).
-  reconfigure("/fusion", Request().set("occupancy_grid_min_z", 1.9).set("occupancy_grid_max_z", 2.1).set(
-                             "occupancy_pixel_stride", 1));
+  // At the node's defaults (every pixel a ray, 5 cm leaves), live: only the grid's height band
+  // moves to the object (restored at the end).
+  ASSERT_EQ(nh_.param("/fusion/occupancy/pixel_stride", 1), 1) << "fusion.test must keep the default stride";
+  reconfigure("/fusion", Request().set("occupancy_grid_min_z", 1.9).set("occupancy_grid_max_z", 2.1));
   auto occupied_cells = [&] { return std::count(grid->data.begin(), grid->data.end(), int8_t{100}); };
   using Point = std::tuple<float, float, float>;
   auto points = [&](bool object) {
@@ -324,8 +324,7 @@ TEST_F(FusionTest, AnObjectThatLeavesIsRemovedFromTheCloudAndTheGrid) {
   EXPECT_EQ(occupied_cells(), 0);
   EXPECT_GT(listener.updates, 0) << "the grid followed through its changed windows";
   EXPECT_GE(static_cast<double>(plane_kept), 0.99 * plane.size());
-  reconfigure("/fusion", Request().set("occupancy_grid_min_z", 2.8).set("occupancy_grid_max_z", 3.2).set(
-                             "occupancy_pixel_stride", 2));
+  reconfigure("/fusion", Request().set("occupancy_grid_min_z", 2.8).set("occupancy_grid_max_z", 3.2));
 }
 
 TEST_F(FusionTest, BadEstimatesAreLoggedAndSkipped) {

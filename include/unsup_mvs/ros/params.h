@@ -73,11 +73,10 @@ struct FusionNodeConfig {
   // ~occupancy/: the OctoMap every accepted depth map is ray-cast into (io/occupancy_map.h) and the
   // height band (world z, metres) projected to the published nav_msgs/OccupancyGrid.
   bool occupancy = true;
-  umvs::OccupancyMapConfig occupancy_map = [] {
-    umvs::OccupancyMapConfig c;
-    c.pixel_stride = 2;  // a quarter of the rays: the live node keeps up on 2 cores
-    return c;
-  }();
+  // Every pixel casts a ray: a stride of 2 leaves rays from small maps wider apart than a leaf
+  // (cells never crossed are never cleared) and saves little (HoloLens, 150 maps: 7.7 against 11 ms
+  // per map; octomap merges the rays that end in one leaf).
+  umvs::OccupancyMapConfig occupancy_map;
   double grid_min_z = 0.1, grid_max_z = 1.5;
   // The whole grid is republished (latched) at most this often, in seconds; the changed window goes
   // out on occupancy_grid_updates at every publish.

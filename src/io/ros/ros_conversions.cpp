@@ -152,6 +152,27 @@ sensor_msgs::Image depth_camera_image_msg(const torch::Tensor& depth, const torc
   return float_to_image_msg(d.where(known, torch::full({}, std::numeric_limits<float>::quiet_NaN())), header);
 }
 
+sensor_msgs::Image depth_camera_image_16uc1_msg(const sensor_msgs::Image& depth_32fc1) {
+  const torch::Tensor metres = image_msg_to_float(depth_32fc1);
+  const auto mm = (metres * 1000.0f).round();
+  const auto known = torch::isfinite(mm) & (mm >= 1.0f) & (mm <= 65535.0f);
+  const auto values = mm.where(known, torch::zeros({})).to(torch::kInt32).contiguous();
+  sensor_msgs::Image m;
+  m.header = depth_32fc1.header;
+  m.height = depth_32fc1.height;
+  m.width = depth_32fc1.width;
+  m.encoding = enc::TYPE_16UC1;
+  m.is_bigendian = 0;
+  m.step = m.width * 2;
+  m.data.resize(static_cast<size_t>(m.step) * m.height);
+  const int32_t* v = values.data_ptr<int32_t>();
+  for (int64_t i = 0; i < values.numel(); ++i) {  // little-endian, as is_bigendian says
+    m.data[2 * i] = static_cast<uint8_t>(v[i] & 0xff);
+    m.data[2 * i + 1] = static_cast<uint8_t>((v[i] >> 8) & 0xff);
+  }
+  return m;
+}
+
 torch::Tensor image_msg_to_float(const sensor_msgs::Image& msg) {
   if (msg.encoding != enc::TYPE_32FC1) {
     throw std::invalid_argument("expected a 32FC1 image, got '" + msg.encoding + "'");

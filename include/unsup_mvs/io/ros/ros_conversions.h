@@ -42,6 +42,10 @@ sensor_msgs::Image float_to_image_msg(const torch::Tensor& values, const std_msg
 // depth_image_proc and other consumers drop those pixels. depth, confidence: float32 [H,W].
 sensor_msgs::Image depth_camera_image_msg(const torch::Tensor& depth, const torch::Tensor& confidence,
                                           double min_confidence, const std_msgs::Header& header);
+// The same depth camera image as 16UC1 millimetres (OpenNI's raw depth, what rtabmap and
+// depth_image_proc/convert_metric take): 0 where 32FC1 has NaN, and where the depth is beyond
+// 65.535 m or rounds to 0 mm.
+sensor_msgs::Image depth_camera_image_16uc1_msg(const sensor_msgs::Image& depth_32fc1);
 // 32FC1 image -> float32 [H,W]. Throws std::invalid_argument for another encoding.
 torch::Tensor image_msg_to_float(const sensor_msgs::Image& msg);
 
