@@ -26,7 +26,6 @@
 #include "unsup_mvs/ReloadModel.h"
 #include "unsup_mvs/core/depth_estimator.h"
 #include "unsup_mvs/core/device.h"
-#include "unsup_mvs/core/keyframe_pose_refiner.h"
 #include "unsup_mvs/core/latest_slot.h"
 #include "unsup_mvs/core/timing_log.h"
 #include "unsup_mvs/io/ros/ros_conversions.h"
@@ -37,6 +36,7 @@
 #include "unsup_mvs/io/plane_count.h"
 #include "unsup_mvs/ros/depth_camera_outputs.h"
 #include "unsup_mvs/ros/nodelets.h"
+#include "unsup_mvs/ros/online_pose_refinement.h"
 #include "unsup_mvs/ros/live_settings.h"
 #include "unsup_mvs/ros/params.h"
 #include "unsup_mvs/ros/reconfigure.h"
@@ -68,9 +68,9 @@ std::string planes_description(int num_depth) {
 }
 
 // The online pose refinement the node's settings ask for (nullptr when off).
-std::unique_ptr<umvs::KeyframePoseRefiner> make_pose_refiner(const InferenceNodeConfig& c) {
+std::unique_ptr<OnlinePoseRefinement> make_pose_refiner(const InferenceNodeConfig& c) {
   if (c.pose_refinement_deg <= 0) return nullptr;
-  return std::make_unique<umvs::KeyframePoseRefiner>(
+  return std::make_unique<OnlinePoseRefinement>(
       umvs::KeyframePoseRefinerConfig{c.pose_refinement_deg, static_cast<size_t>(c.pose_refinement_keyframes)});
 }
 
@@ -229,22 +229,26 @@ class InferenceNodelet : public nodelet::Nodelet {
     umvs::DepthMap map;
     int planes = 0;
     std::string served;
-    bool refined = false;
     std::string refinement = "off";
+    // The reference's pose as the depth map was made and its optical frame: with refined poses the
+    // turned camera, in its own frame that tf places there too, so that fusion, the occupancy map
+    // and the depth camera's consumers all put the map where it agrees with the other keyframes.
+    geometry_msgs::Pose pose = set.reference_pose;
+    std_msgs::Header header = set.reference_image.header;
     {
       std::lock_guard<std::mutex> lock(model_mutex_);
       if (!estimator_) throw std::runtime_error("no model loaded (set ~checkpoint or call reload_model)");
       fitPlanesToInput(views.front());
       planes = estimator_->num_depth();
-      if (pose_refiner_) {
-        refined = refineViews(set, &views);
-        refinement = std::to_string(pose_refiner_->measured_pairs()) + " pairs over " +
-                     std::to_string(pose_refiner_->keyframes()) + " keyframes";
-      }
+      const bool refined = pose_refiner_ && pose_refiner_->correct(*estimator_, set, &views);
+      if (pose_refiner_) refinement = pose_refiner_->summary();
       map = estimator_->estimate(views, set.depth_min, set.depth_max);
       served = checkpoint_;
+      if (refined) {
+        pose = umvs::matrix_to_pose(map.camera.T_cam_world.inverse());
+        pose_refiner_->place(set.header.frame_id, pose, &header);
+      }
     }
-    std_msgs::Header header = set.reference_image.header;  // stamp and optical frame of the reference
     unsup_mvs::DepthEstimate out;
     out.header = header;
     out.keyframe_id = set.reference_id;
@@ -253,9 +257,7 @@ class InferenceNodelet : public nodelet::Nodelet {
     out.image = umvs::rgb8_to_image_msg(map.color, header);
     out.camera_info = umvs::camera_info_from_camera(map.camera, header);
     out.world_frame = set.header.frame_id;
-    // The reference's pose as the depth map was made: turned when the poses are refined, so that
-    // fusion places it where it agrees with the other keyframes.
-    out.pose = refined ? umvs::matrix_to_pose(map.camera.T_cam_world.inverse()) : set.reference_pose;
+    out.pose = pose;
     out.depth_min = set.depth_min;
     out.depth_max = set.depth_max;
     out.inference_seconds = static_cast<float>(map.seconds);
@@ -299,25 +301,6 @@ class InferenceNodelet : public nodelet::Nodelet {
                  config_.fine.enabled() ? " (the first pass's, then a fine pass)" : "");
   }
 
-  // Corrects the keyframe set's cameras by the online pose refinement (under model_mutex_) and says
-  // whether it did: a set without an id per source is served with its poses as given.
-  bool refineViews(const unsup_mvs::KeyframeSet& set, std::vector<umvs::ViewInput>* views) {
-    if (set.source_ids.size() != set.source_images.size()) {
-      NODELET_WARN_THROTTLE(10.0, "inference: keyframe set %u has %zu source ids for %zu sources; its poses are not refined",
-                            set.reference_id, set.source_ids.size(), set.source_images.size());
-      return false;
-    }
-    std::vector<int64_t> ids{static_cast<int64_t>(set.reference_id)};
-    for (const auto id : set.source_ids) ids.push_back(static_cast<int64_t>(id));
-    *views = pose_refiner_->correct(*estimator_, ids, std::move(*views), set.depth_min, set.depth_max);
-    const Eigen::Vector3d turn = pose_refiner_->turn_degrees(ids.front());
-    NODELET_DEBUG("inference: keyframe %u: %d new pair measurements, %zu pairs over %zu keyframes; reference turned by "
-                  "(%.2f, %.2f, %.2f) deg",
-                  set.reference_id, pose_refiner_->last_new_measurements(), pose_refiner_->measured_pairs(),
-                  pose_refiner_->keyframes(), turn.x(), turn.y(), turn.z());
-    return true;
-  }
-
   std::string statsLine() const {
     return std::to_string(timings_.count()) + " keyframe sets processed, " + std::to_string(pending_->dropped()) +
            " dropped (stale), " + std::to_string(failed_.load()) + " failed; " +
@@ -333,22 +316,18 @@ class InferenceNodelet : public nodelet::Nodelet {
     status.name = "unsup_mvs: " + getName();
     status.hardware_id = device_.str();
     status.message = "depth map in " + std::to_string(total) + " s";
-    auto kv = [&](const std::string& k, const std::string& v) {
-      diagnostic_msgs::KeyValue p;
-      p.key = k;
-      p.value = v;
-      status.values.push_back(p);
-    };
-    kv("processed", std::to_string(timings_.count()));
-    kv("dropped_stale", std::to_string(pending_->dropped()));
-    kv("failed", std::to_string(failed_.load()));
-    kv("last_total_s", std::to_string(total));
-    kv("last_network_s", std::to_string(network));
-    kv("last_latency_s", std::to_string(latency));
-    kv("total_p50_p90", timings_.summary("image to depth map", "after the image's stamp"));
-    kv("depth_planes", std::to_string(planes));
-    kv("checkpoint", served);
-    kv("pose_refinement", refinement);
+    const std::pair<const char*, std::string> values[] = {
+        {"processed", std::to_string(timings_.count())}, {"dropped_stale", std::to_string(pending_->dropped())},
+        {"failed", std::to_string(failed_.load())}, {"last_total_s", std::to_string(total)},
+        {"last_network_s", std::to_string(network)}, {"last_latency_s", std::to_string(latency)},
+        {"total_p50_p90", timings_.summary("image to depth map", "after the image's stamp")},
+        {"depth_planes", std::to_string(planes)}, {"checkpoint", served}, {"pose_refinement", refinement}};
+    for (const auto& [key, value] : values) {
+      diagnostic_msgs::KeyValue kv;
+      kv.key = key;
+      kv.value = value;
+      status.values.push_back(kv);
+    }
     array.status.push_back(status);
     diagnostics_pub_.publish(array);
   }
@@ -461,7 +440,7 @@ class InferenceNodelet : public nodelet::Nodelet {
   std::string checkpoint_;
   std::mutex model_mutex_;
   std::unique_ptr<umvs::DepthEstimator> estimator_;
-  std::unique_ptr<umvs::KeyframePoseRefiner> pose_refiner_;  // ~pose_refinement_deg > 0 (else null); under model_mutex_
+  std::unique_ptr<OnlinePoseRefinement> pose_refiner_;  // ~pose_refinement_deg > 0 (else null); under model_mutex_
 
   // resource bounds (docs/reliability.md)
   int max_image_pixels_ = kDefaultMaxImagePixels, max_views_ = 16, max_planes_ = 256;
