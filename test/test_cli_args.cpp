@@ -101,6 +101,8 @@ TEST(CliErrors, TheMessageNamesTheRealProblem) {
            Case{"infer --dta x --out o", "unknown option --dta (did you mean --data?)"},
            Case{"fuse --depth d --out o.ply --threads abc", "needs an integer, got 'abc'"},
            Case{"fuse --depth d --out o.ply --min-confidence high", "needs a number, got 'high'"},
+           Case{"fuse --depth d --out o.bt --octomap-extent a,b", "--octomap-extent needs xmin,ymin,zmin,xmax,ymax,zmax"},
+           Case{"fuse --depth d --out o.ply --bbox 0,0,0,1,1,1m", "--bbox needs xmin,ymin,zmin,xmax,ymax,zmax"},
            Case{"infer --data " + data + " --checkpoint none.pt --ref 99 --out " + test::temp_dir("cli_errors") + "/infer",
                 "view 99 is not in " + data + "/pair.txt"},
        }) {

@@ -190,7 +190,11 @@ FusionNodeConfig fusion_node_config_from_ros(const ros::NodeHandle& nh) {
   occupancy.param("max_nodes", max_nodes, max_nodes);
   c.occupancy_map.max_nodes = max_nodes;
   std::vector<double> extent;
-  if (occupancy.getParam("extent", extent)) {
+  if (occupancy.hasParam("extent")) {
+    if (!occupancy.getParam("extent", extent)) {
+      throw std::invalid_argument("occupancy/extent must be a list [min_x, min_y, min_z, max_x, max_y, max_z] of "
+                                  "numbers (metres, world frame)");
+    }
     if (extent.size() != 6) {
       throw std::invalid_argument("occupancy/extent must be [min_x, min_y, min_z, max_x, max_y, max_z] (metres, world "
                                   "frame), got " + std::to_string(extent.size()) + " numbers");

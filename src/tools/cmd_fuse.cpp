@@ -3,6 +3,7 @@
 #include <torch/torch.h>
 
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
@@ -84,12 +85,21 @@ umvs::FusionView load_view(const Layout& l, int id) {
 
 // A box given as xmin,ymin,zmin,xmax,ymax,zmax to `option`.
 std::vector<double> parse_box(const std::string& s, const std::string& option) {
+  const auto refuse = [&] {
+    return std::invalid_argument("--" + option + " needs xmin,ymin,zmin,xmax,ymax,zmax (numbers, min < max), got '" + s + "'");
+  };
   std::vector<double> b;
   std::stringstream ss(s);
-  for (std::string item; std::getline(ss, item, ',');) b.push_back(std::stod(item));
-  if (b.size() != 6 || b[0] >= b[3] || b[1] >= b[4] || b[2] >= b[5]) {
-    throw std::invalid_argument("--" + option + " needs xmin,ymin,zmin,xmax,ymax,zmax with min < max, got '" + s + "'");
+  for (std::string item; std::getline(ss, item, ',');) {
+    size_t used = 0;
+    try {
+      b.push_back(std::stod(item, &used));
+    } catch (const std::logic_error&) {  // not a number, or out of range
+      throw refuse();
+    }
+    if (used != item.size() || !std::isfinite(b.back())) throw refuse();
   }
+  if (b.size() != 6 || b[0] >= b[3] || b[1] >= b[4] || b[2] >= b[5]) throw refuse();
   return b;
 }
 

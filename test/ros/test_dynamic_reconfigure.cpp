@@ -335,6 +335,29 @@ TEST(ConfigFiles, TheYamlsParseAndSayOnlyWhatDiffersFromTheDefaults) {
   EXPECT_TRUE(umvs::FineTuneConfig{}.train_args.empty());
 }
 
+// ~occupancy/extent: a box of six numbers (integers too), anything else refused by name.
+TEST(ConfigFiles, TheOccupancyExtentIsABoxOfSixNumbersOrRefusedByName) {
+  const std::string ns = "/extent_cases/fusion";
+  const auto refusal = [&]() -> std::string {
+    try {
+      umvs_ros::fusion_node_config_from_ros(ros::NodeHandle(ns));
+      return "";
+    } catch (const std::invalid_argument& e) {
+      return e.what();
+    }
+  };
+  ros::param::set(ns + "/occupancy/extent", std::vector<int>{-5, -4, -1, 5, 4, 3});
+  EXPECT_EQ(refusal(), "");
+  EXPECT_DOUBLE_EQ(umvs_ros::fusion_node_config_from_ros(ros::NodeHandle(ns)).occupancy_map.min_y, -4.0);
+  ros::param::set(ns + "/occupancy/extent", std::string("the ground floor"));
+  EXPECT_NE(refusal().find("occupancy/extent must be a list"), std::string::npos) << refusal();
+  ros::param::set(ns + "/occupancy/extent", std::vector<double>{1, 2, 3});
+  EXPECT_NE(refusal().find("got 3 numbers"), std::string::npos) << refusal();
+  ros::param::set(ns + "/occupancy/extent", std::vector<double>{5, 0, 0, 1, 1, 1});
+  EXPECT_NE(refusal().find("extent"), std::string::npos) << refusal();
+  ros::param::del(ns);
+}
+
 }  // namespace
 
 // One default per setting: the cfg's defaults, as the generated config reports them, against the
