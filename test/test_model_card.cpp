@@ -1,4 +1,4 @@
-// The model card's rebuild command (docs/results.md, "Model card"): scripts/experiments/
+// The model card's rebuild command (models/README.md): scripts/experiments/
 // train_default_model.sh run end to end at a tiny size (one scene per recipe at 96x64, 2 steps), so
 // that the command that made models/unsup_mvsnet.pt keeps working: it renders its scenes, imports
 // templeRing when ../shared is there, trains and leaves a checkpoint that umvs infer serves.

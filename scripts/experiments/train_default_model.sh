@@ -27,8 +27,8 @@
 #   MAX_ZOOM (1 and 1.25: the random crop's zoom; RENDER_WIDTH / WIDTH trains on crops at the
 #   renders' own pixel scale, `umvs train --min-zoom`)
 #
-# The shipped model is three runs of this script, each from the one before (docs/results.md,
-# "Model card", has each run's data, steps and commands; TEXTURES as installed by install_textures.sh):
+# The shipped model is three runs of this script, each from the one before (models/README.md has
+# each run's data, steps and commands; TEXTURES as installed by install_textures.sh):
 #   1. CPU:  defaults (160x128, D = 32, 6,000 steps, constant 1e-3, random weights), run with the
 #            script as it was at commit 89ba1aa (24 scenes, no corridors);
 #   2. GPU:  DEVICE=cuda WIDTH=320 HEIGHT=256 NUM_DEPTH=64 INIT=<1> STEPS=100000 MAX_MINUTES=4.7
@@ -41,9 +41,9 @@
 # A fourth, CPU run on crops at the renders' own scale (WIDTH=320 HEIGHT=256 NUM_DEPTH=128
 # RENDER_WIDTH=640 RENDER_HEIGHT=512 MIN_ZOOM=2 MAX_ZOOM=2.5 SCENES_PER_RECIPE=16
 # SUPERVISED_SHARE=0.5 LR=2e-4 LR_SCHEDULE=cosine STEPS=2400 THREADS=2 INIT=<3>, 52 minutes on
-# 2 cores) is better before adaptation but not shipped (docs/results.md, "Rejected ideas").
+# 2 cores) is better before adaptation but not shipped (docs/experiments.md).
 # A fifth, GPU run from <3> (run 3's settings, SCENES_PER_RECIPE=10, LR=5e-4 or 2e-4, STEPS=1923)
-# gains on rendered scenes and loses on real images: not shipped (docs/results.md, "Rejected ideas").
+# gains on rendered scenes and loses on real images: not shipped (docs/experiments.md).
 # On a GPU machine without apt, build UMVS with scripts/build_portable.sh and pass the textures of
 # scripts/portable_deps.sh --textures (docs/building.md).
 set -euo pipefail
