@@ -118,11 +118,11 @@ adapt_args() {
     # The robust loss at a fine-tuning rate (chosen on a fresh rendered table-top scene among 3e-4
     # and 1e-4, docs/results.md, "Rejected ideas") instead of the from-scratch 1e-3.
     photometric_low_lr) echo "--lr 3e-4" ;;
-    # The same at a tenth of the training rate (docs/results.md, "Rejected ideas").
+    # The same at a tenth of the training rate (docs/experiments.md).
     photometric_lr1e-4) echo "--lr 1e-4" ;;
     # The robust loss on the target with half of the steps supervised on rendered training scenes
     # (scripts/experiments/render_training_scenes.sh: two of each recipe, procedural textures), so that the
-    # model keeps what it learnt there (docs/results.md, "Rejected ideas").
+    # model keeps what it learnt there (docs/experiments.md).
     photometric_rehearsal) echo "--supervised-data $(rehearsal_scenes) --supervised-share 0.5 --supervised-weight 0.1" ;;
     self) echo "--self-training-every 25" ;;
     # The trainer node's recipe (config/trainer.yaml): labels, anchors and judge from one more pass
