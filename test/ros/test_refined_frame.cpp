@@ -49,7 +49,7 @@ TEST(RefinedFrame, DepthCloudAndTfAgreeInTheRefinedCamerasFrame) {
   set.reference_id = ref;
   std_msgs::Header header;
   header.frame_id = "cam";
-  header.stamp = set.header.stamp;
+  header.stamp = set.header.stamp - ros::Duration(0.25);  // the image's own stamp, apart from the set's
   set.reference_image = umvs::rgb8_to_image_msg(scene.views[ref].image, header);
   set.reference_info = umvs::camera_info_from_camera(given, header);
   set.reference_pose = umvs::matrix_to_pose(given.T_cam_world.inverse());
@@ -68,7 +68,8 @@ TEST(RefinedFrame, DepthCloudAndTfAgreeInTheRefinedCamerasFrame) {
   // The robot's tf: the camera where its odometry says (static here: latched, so it cannot be missed).
   tf2_ros::StaticTransformBroadcaster robot_tf;
   geometry_msgs::TransformStamped camera;
-  camera.header = set.header;
+  camera.header = header;
+  camera.header.frame_id = "world";
   camera.child_frame_id = "cam";
   camera.transform = umvs::matrix_to_transform(given.T_cam_world.inverse());
 
@@ -96,7 +97,7 @@ TEST(RefinedFrame, DepthCloudAndTfAgreeInTheRefinedCamerasFrame) {
   EXPECT_EQ(estimate->header.frame_id, "cam_refined");
   EXPECT_EQ(depth->header.frame_id, "cam_refined");
   EXPECT_EQ(depth_info->header.frame_id, "cam_refined");
-  EXPECT_EQ(depth->header.stamp, set.header.stamp);
+  EXPECT_EQ(depth->header.stamp, set.reference_image.header.stamp);
   const Eigen::Matrix4d sent = umvs::pose_to_matrix(estimate->pose);
   const Eigen::Matrix4d odometry = given.T_cam_world.inverse();
   const double turned = angle_deg(sent, odometry);
