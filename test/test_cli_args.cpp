@@ -81,7 +81,7 @@ TEST(CliErrors, BadArgumentsAreRefusedOnStderrNamingTheOption) {
            Case{"train --frobnicate 3 --out " + out, "--frobnicate"},  // unknown option
            Case{"bench --runs", "--runs"},                          // missing value
            Case{"render --cloud a.ply", "--out"},                   // missing required option
-           Case{"fuse --depth d --out o.ply --min-views many", "--min-views"},  // numeric default (FusionConfig)
+           Case{"fuse --depth d --out o.ply --min-agreeing-views many", "--min-agreeing-views"},  // bound to a FusionConfig int
        }) {
     const Result r = run_umvs(c.args, kOnlyStderr);
     EXPECT_EQ(r.status, 2) << c.args << ": " << r.output;

@@ -141,9 +141,9 @@ TEST(KillFaults, FusionKilledWhileWritingKeepsThePreviousCloud) {
   const std::string data = scene("kill_fuse_data", 320, 256, 6);
   const std::string dir = test::temp_dir("kill_fuse");
   const std::vector<std::string> args = {"fuse", "--depth", data + "/depth_gt", "--data", data, "--min-confidence", "0",
-                                         "--min-views", "1", "--threads", "1", "--out", dir + "/cloud.ply"};
+                                         "--min-agreeing-views", "1", "--threads", "1", "--out", dir + "/cloud.ply"};
   ASSERT_EQ(run_umvs("fuse --depth " + data + "/depth_gt --data " + data +
-                 " --min-confidence 0 --min-views 1 --threads 1 --out " + dir + "/cloud.ply").status, 0);
+                 " --min-confidence 0 --min-agreeing-views 1 --threads 1 --out " + dir + "/cloud.ply").status, 0);
   const std::string before = file_bytes(dir + "/cloud.ply");
   ASSERT_GT(read_ply(dir + "/cloud.ply").size(), 10000u);
   bool killed_while_writing = false;

@@ -52,7 +52,7 @@ stream() {  # stream LABEL [fuse options]
   done | sort -n | head -1 | awk -v label="$label" '{ printf "| %s | %d | %s | %s |\n", label, $3, $1, $2 }'
 }
 for leaf in 0.001 0.002; do
-  stream "no voxel" --voxel 0
-  stream "hash $leaf" --voxel "$leaf"
+  stream "no voxel" --voxel-size 0
+  stream "hash $leaf" --voxel-size "$leaf"
   stream "pcl::VoxelGrid $leaf after the fusion" --voxel 0 --voxel-grid "$leaf"
 done

@@ -3,20 +3,52 @@
 // the config structs'.
 #include "unsup_mvs/ros/live_settings.h"
 
-namespace umvs_ros {
+#include <stdexcept>
+#include <string>
 
-// The live-tunable settings (cfg/Fusion.cfg), both ways.
+#include "unsup_mvs/core/fusion_settings.h"
+
+namespace umvs_ros {
+namespace {
+
+// A setting's value in a dynamic_reconfigure message, by name (the cfg holds every node setting
+// of the table: a test compares them).
+void set_live(dynamic_reconfigure::Config& live, const std::string& name, double value, bool integer) {
+  if (integer) {
+    for (auto& p : live.ints) {
+      if (p.name == name) return void(p.value = static_cast<int>(value));
+    }
+  } else {
+    for (auto& p : live.doubles) {
+      if (p.name == name) return void(p.value = value);
+    }
+  }
+  throw std::logic_error("the setting " + name + " is not in the node's dynamic_reconfigure cfg");
+}
+
+double live_value(const dynamic_reconfigure::Config& live, const std::string& name) {
+  for (const auto& p : live.ints) {
+    if (p.name == name) return p.value;
+  }
+  for (const auto& p : live.doubles) {
+    if (p.name == name) return p.value;
+  }
+  throw std::logic_error("the setting " + name + " is not in the node's dynamic_reconfigure cfg");
+}
+
+}  // namespace
+
+// The live-tunable settings (cfg/Fusion.cfg), both ways: FusionConfig's by its settings table.
 unsup_mvs::FusionConfig to_reconfigure(const FusionNodeConfig& node) {
   const umvs::FusionConfig& c = node.fusion;
   const umvs::OccupancyMapConfig& o = node.occupancy_map;
   unsup_mvs::FusionConfig r = unsup_mvs::FusionConfig::__getDefault__();
-  r.min_confidence = c.min_confidence;
-  r.max_reprojection_px = c.max_reprojection_px;
-  r.max_relative_depth = c.max_relative_depth;
-  r.min_agreeing_views = c.min_agreeing_views;
-  r.voxel_size = c.voxel_size;
-  r.clear_after_views = c.clear_after_views;
-  r.clear_margin = c.clear_margin;
+  dynamic_reconfigure::Config live;
+  r.__toMessage__(live);
+  for (const auto& setting : umvs::fusion_settings()) {
+    if (setting.on_node) set_live(live, setting.name, setting.value(c), setting.is_integer());
+  }
+  r.__fromMessage__(live);
   r.occupancy_resolution = o.resolution;
   r.occupancy_max_range = o.max_range;
   r.occupancy_prob_hit = o.prob_hit;
@@ -31,13 +63,11 @@ unsup_mvs::FusionConfig to_reconfigure(const FusionNodeConfig& node) {
 FusionNodeConfig with_reconfigure(FusionNodeConfig node, const unsup_mvs::FusionConfig& r) {
   umvs::FusionConfig& c = node.fusion;
   umvs::OccupancyMapConfig& o = node.occupancy_map;
-  c.min_confidence = r.min_confidence;
-  c.max_reprojection_px = r.max_reprojection_px;
-  c.max_relative_depth = r.max_relative_depth;
-  c.min_agreeing_views = r.min_agreeing_views;
-  c.voxel_size = r.voxel_size;
-  c.clear_after_views = r.clear_after_views;
-  c.clear_margin = r.clear_margin;
+  dynamic_reconfigure::Config live;
+  r.__toMessage__(live);
+  for (const auto& setting : umvs::fusion_settings()) {
+    if (setting.on_node) setting.visit(c, [&](auto& field) { field = live_value(live, setting.name); });
+  }
   o.resolution = r.occupancy_resolution;
   o.max_range = r.occupancy_max_range;
   o.prob_hit = r.occupancy_prob_hit;

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "unsup_mvs/core/device.h"
+#include "unsup_mvs/core/fusion_settings.h"
 #include "unsup_mvs/io/cloud_file.h"
 #include "unsup_mvs/ros/nodelets.h"
 
@@ -49,13 +50,9 @@ umvs::KeyframeStreamConfig keyframe_stream_config_from_ros(const ros::NodeHandle
 
 umvs::FusionConfig fusion_config_from_ros(const ros::NodeHandle& nh) {
   umvs::FusionConfig c;
-  nh.param("min_confidence", c.min_confidence, c.min_confidence);
-  nh.param("max_reprojection_px", c.max_reprojection_px, c.max_reprojection_px);
-  nh.param("max_relative_depth", c.max_relative_depth, c.max_relative_depth);
-  nh.param("min_agreeing_views", c.min_agreeing_views, c.min_agreeing_views);
-  nh.param("voxel_size", c.voxel_size, c.voxel_size);
-  nh.param("clear_after_views", c.clear_after_views, c.clear_after_views);
-  nh.param("clear_margin", c.clear_margin, c.clear_margin);
+  for (const auto& setting : umvs::fusion_settings()) {
+    if (setting.on_node) setting.visit(c, [&](auto& field) { nh.param(setting.name, field, field); });
+  }
   std::string rule = umvs::to_string(c.source_rule);
   nh.param("source_rule", rule, rule);
   c.source_rule = umvs::fusion_source_rule_from_string(rule);

@@ -170,6 +170,12 @@ Args& Args::flag(const std::string& name, bool* field, const std::string& help) 
   return *this;
 }
 
+Args& Args::deprecated(const std::string& old_name, const std::string& name) {
+  if (!defaults_.count(name)) throw std::logic_error("option --" + name + " was not declared");
+  renamed_[old_name] = name;
+  return *this;
+}
+
 void Args::check_known_options(const std::vector<std::string>& args) const {
   for (const auto& a : args) {
     if (a.size() < 3 || a.compare(0, 2, "--") != 0) continue;
@@ -188,6 +194,15 @@ void Args::check_known_options(const std::vector<std::string>& args) const {
 
 bool Args::parse(int argc, char** argv) {
   std::vector<std::string> args(argv, argv + argc);
+  for (auto& a : args) {  // earlier spellings: "--old" or "--old=value"
+    if (a.compare(0, 2, "--") != 0) continue;
+    const size_t end = a.find('=');
+    const auto renamed = renamed_.find(a.substr(2, end == std::string::npos ? std::string::npos : end - 2));
+    if (renamed == renamed_.end()) continue;
+    std::cerr << app_->get_name() << ": --" << renamed->first << " is deprecated and will be removed in the next release; "
+              << "use --" << renamed->second << "\n";
+    a = "--" + renamed->second + (end == std::string::npos ? "" : a.substr(end));
+  }
   check_known_options(args);
   std::reverse(args.begin(), args.end());  // CLI11 takes them last first
   try {

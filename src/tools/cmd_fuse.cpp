@@ -13,6 +13,7 @@
 
 #include "unsup_mvs/core/device.h"
 #include "unsup_mvs/core/fusion.h"
+#include "unsup_mvs/core/fusion_settings.h"
 #include "unsup_mvs/core/image_ops.h"
 #include "unsup_mvs/io/array_io.h"
 #include "unsup_mvs/io/cloud_file.h"
@@ -106,7 +107,7 @@ std::vector<double> parse_box(const std::string& s, const std::string& option) {
 }  // namespace
 
 UMVS_COMMAND(fuse, "fuse depth maps into one consistent point cloud (PLY or PCD)") {
-  const umvs::FusionConfig fusion_defaults;  // the thresholds' defaults are FusionConfig's
+  umvs::FusionConfig cfg;  // the thresholds' options are bound to its fields (core/fusion_settings.h)
   umvs::Args args("fuse",
                   "Keeps the depth-map pixels that enough other views agree with (reprojection error and\n"
                   "relative depth difference after a round trip, see docs/fusion.md) and writes them as one\n"
@@ -126,24 +127,17 @@ UMVS_COMMAND(fuse, "fuse depth maps into one consistent point cloud (PLY or PCD)
       .option("octomap-pixel-stride", umvs::OccupancyMapConfig{}.pixel_stride, ".bt: every N-th depth pixel each way casts a ray")
       .option("octomap-extent", "",
               ".bt: the map's box MIN_X,MIN_Y,MIN_Z,MAX_X,MAX_Y,MAX_Z in metres (default: a building floor, "
-              "-25,-25,-2,25,25,4); nothing outside is mapped")
-      .option("min-confidence", fusion_defaults.min_confidence, "pixels below this confidence are ignored")
-      .option("max-reprojection", fusion_defaults.max_reprojection_px,
-              "max reprojection error after the round trip (pixels)")
-      .option("max-relative-depth", fusion_defaults.max_relative_depth, "max relative depth difference")
-      .option("min-views", fusion_defaults.min_agreeing_views, "agreeing source views needed")
-      .option("max-sources", fusion_defaults.max_source_views, "sources tested per reference (pair.txt order)")
-      .option("voxel", fusion_defaults.voxel_size, "voxel edge for de-duplication in scene units (0 = off)")
-      .option("source-rule", umvs::to_string(fusion_defaults.source_rule),
+              "-25,-25,-2,25,25,4); nothing outside is mapped");
+  for (const auto& setting : umvs::fusion_settings()) {
+    setting.visit(cfg, [&](auto& field) { args.bind(setting.option(), &field, setting.help); });
+    for (const auto& old : setting.old_options) args.deprecated(old, setting.option());
+  }
+  args.option("source-rule", umvs::to_string(cfg.source_rule),
               "which source depths count: neighbours (the 4 source pixels around the projection are confident\n"
               "estimates) | mvsnet (MVSNet's eval.py: the raw source depth, as cv2.remap reads it)")
       .option("ref", "", "comma-separated view ids to fuse (default: all in pair.txt with a depth map)")
       .flag("stream", "use the streaming fusion (views in pair.txt order, --window recent estimates)")
       .option("window", "10", "with --stream: estimates kept in the ring")
-      .option("clear-after-views", fusion_defaults.clear_after_views,
-              "with --stream: a point leaves the cloud when this many estimates in a row see through it (0 = never)")
-      .option("clear-margin", fusion_defaults.clear_margin,
-              "with --stream: seen through = farther than (1 + this) x the point's depth")
       .option("sor-k", "0", "statistical outlier removal: neighbours per point (PCL mean-K; 0 = off)")
       .option("sor-std", "2.0", "statistical outlier removal: drop points farther than mean + this many std devs")
       .option("radius", "0", "radius outlier removal: search radius in scene units (0 = off)")
@@ -155,16 +149,7 @@ UMVS_COMMAND(fuse, "fuse depth maps into one consistent point cloud (PLY or PCD)
   if (!args.parse(argc, argv)) return 0;
   umvs::configure_threads(args.integer("threads"));
   const auto device = umvs::parse_device(args.str("device"));
-  umvs::FusionConfig cfg;
-  cfg.min_confidence = args.real("min-confidence");
-  cfg.max_reprojection_px = args.real("max-reprojection");
-  cfg.max_relative_depth = args.real("max-relative-depth");
-  cfg.min_agreeing_views = args.integer("min-views");
-  cfg.max_source_views = args.integer("max-sources");
-  cfg.voxel_size = args.real("voxel");
   cfg.source_rule = umvs::fusion_source_rule_from_string(args.str("source-rule"));
-  cfg.clear_after_views = args.integer("clear-after-views");
-  cfg.clear_margin = args.real("clear-margin");
   cfg.validate();
   umvs::CloudFilterConfig filters;
   filters.sor_mean_k = args.integer("sor-k");
@@ -283,8 +268,8 @@ UMVS_COMMAND(fuse, "fuse depth maps into one consistent point cloud (PLY or PCD)
     report_bbox();  // the last line is the written cloud's
   }
   if (cloud.empty()) {
-    std::cerr << "no point survived the consistency test: nothing written (loosen --min-views, --min-confidence, "
-                 "--max-reprojection or --max-relative-depth)\n";
+    std::cerr << "no point survived the consistency test: nothing written (loosen --min-agreeing-views, "
+                 "--min-confidence, --max-reprojection-px or --max-relative-depth)\n";
     return 1;
   }
   umvs::write_cloud(args.str("out"), cloud);

@@ -52,6 +52,9 @@ class Args {
   Args& bind(const std::string& name, std::vector<std::string>* field, const std::string& help);
   Args& bind_repeated(const std::string& name, std::vector<std::string>* field, const std::string& help);
   Args& flag(const std::string& name, bool* field, const std::string& help);
+  // An earlier spelling of a declared option: still taken, as `name`, with a note on stderr that
+  // it is deprecated (kept for one release after a rename).
+  Args& deprecated(const std::string& old_name, const std::string& name);
 
   // Returns false when --help was given (usage already printed). Throws std::invalid_argument
   // with a message naming the offending option otherwise; an unknown option is reported first
@@ -77,6 +80,7 @@ class Args {
   Args& declare(const std::string& name, const std::string& default_value, const std::string& help, Kind kind);
   void check_known_options(const std::vector<std::string>& args) const;
   std::map<std::string, std::string> defaults_;
+  std::map<std::string, std::string> renamed_;  // old spelling -> declared name
   // CLI11 writes into these (std::map keeps their addresses while options are added).
   std::map<std::string, std::vector<std::string>> values_;
   std::map<std::string, bool> flags_;
