@@ -150,10 +150,3 @@ TEST(DepthCamera, DepthImageProcMakesTheCloudOfOurDepthMap) {
 }
 
 }  // namespace
-
-int main(int argc, char** argv) {
-  testing::InitGoogleTest(&argc, argv);
-  ros::init(argc, argv, "test_depth_camera");
-  ros::NodeHandle nh;
-  return RUN_ALL_TESTS();
-}

@@ -467,10 +467,3 @@ TEST_F(FaultsTest, AKilledTrainerTakesItsTrainingAlongAndARestartCleansUp) {
 }
 
 }  // namespace
-
-int main(int argc, char** argv) {
-  testing::InitGoogleTest(&argc, argv);
-  ros::init(argc, argv, "test_faults");
-  ros::NodeHandle nh;
-  return RUN_ALL_TESTS();
-}

@@ -358,10 +358,3 @@ TEST_F(FusionTest, BadEstimatesAreLoggedAndSkipped) {
 }
 
 }  // namespace
-
-int main(int argc, char** argv) {
-  testing::InitGoogleTest(&argc, argv);
-  ros::init(argc, argv, "test_fusion");
-  ros::NodeHandle nh;
-  return RUN_ALL_TESTS();
-}

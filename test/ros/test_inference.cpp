@@ -279,10 +279,3 @@ TEST_F(InferenceTest, FinePassMakesHalfResolutionMaps) {
 }
 
 }  // namespace
-
-int main(int argc, char** argv) {
-  testing::InitGoogleTest(&argc, argv);
-  ros::init(argc, argv, "test_inference");
-  ros::NodeHandle nh;
-  return RUN_ALL_TESTS();
-}

@@ -239,10 +239,3 @@ TEST_F(KeyframeSelectorTest, AtTheEndOfALogFlushSendsTheLastKeyframe) {
 }
 
 }  // namespace
-
-int main(int argc, char** argv) {
-  testing::InitGoogleTest(&argc, argv);
-  ros::init(argc, argv, "test_keyframe_selector");
-  ros::NodeHandle nh;
-  return RUN_ALL_TESTS();
-}

@@ -60,10 +60,3 @@ TEST(KeyframeSelectorSimTime, AFrameWithoutItsTransformDoesNotBlockTheNodeWhenTh
 }
 
 }  // namespace
-
-int main(int argc, char** argv) {
-  testing::InitGoogleTest(&argc, argv);
-  ros::init(argc, argv, "test_keyframe_selector_sim_time");
-  ros::NodeHandle nh;
-  return RUN_ALL_TESTS();
-}

@@ -32,7 +32,7 @@ namespace fs = std::filesystem;
 
 namespace {
 
-std::string g_source_dir;  // the package source folder (first argument, from the .test file)
+const std::string g_source_dir = UMVS_SOURCE_DIR;  // the package source folder
 
 using umvs_test::wait_for;
 
@@ -214,11 +214,3 @@ TEST(Pipeline, SyntheticBagToFusedCloud) {
 }
 
 }  // namespace
-
-int main(int argc, char** argv) {
-  testing::InitGoogleTest(&argc, argv);
-  ros::init(argc, argv, "test_pipeline");
-  if (argc > 1) g_source_dir = argv[1];
-  ros::NodeHandle nh;
-  return RUN_ALL_TESTS();
-}

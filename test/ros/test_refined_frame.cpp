@@ -142,9 +142,3 @@ TEST(RefinedFrame, DepthCloudAndTfAgreeInTheRefinedCamerasFrame) {
 }
 
 }  // namespace
-
-int main(int argc, char** argv) {
-  testing::InitGoogleTest(&argc, argv);
-  ros::init(argc, argv, "test_refined_frame");
-  return RUN_ALL_TESTS();
-}

@@ -248,10 +248,3 @@ TEST(SelectorBagParity, SameKeyframesAndIntrinsicsLiveAndOffline) {
 }
 
 }  // namespace
-
-int main(int argc, char** argv) {
-  testing::InitGoogleTest(&argc, argv);
-  ros::init(argc, argv, "test_selector_bag_parity");
-  ros::NodeHandle nh;
-  return RUN_ALL_TESTS();
-}

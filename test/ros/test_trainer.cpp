@@ -324,10 +324,3 @@ TEST_F(TrainerTest, FineTuningNeverServesAWorseModel) {
 }
 
 }  // namespace
-
-int main(int argc, char** argv) {
-  testing::InitGoogleTest(&argc, argv);
-  ros::init(argc, argv, "test_trainer");
-  ros::NodeHandle nh;
-  return RUN_ALL_TESTS();
-}
