@@ -1,10 +1,9 @@
 #include "unsup_mvs/io/inference_folder.h"
 
 #include <filesystem>
-#include <stdexcept>
 
-#include "unsup_mvs/io/mvs_folder.h"
 #include "unsup_mvs/io/atomic_file.h"
+#include "unsup_mvs/io/mvs_folder.h"
 
 namespace fs = std::filesystem;
 
@@ -26,14 +25,5 @@ std::string InferenceFolder::confidence_preview_path(int id) const {
 }
 std::string InferenceFolder::cam_path(int id) const { return cams_dir() + "/" + view_file_stem(id) + "_cam.txt"; }
 std::string InferenceFolder::image_path(int id) const { return images_dir() + "/" + view_file_stem(id) + ".png"; }
-
-std::string find_view_image(const std::string& images_dir, int id) {
-  for (const char* ext : {".jpg", ".png", ".jpeg", ".JPG", ".PNG"}) {
-    const auto p = fs::path(images_dir) / (view_file_stem(id) + ext);
-    if (fs::exists(p)) return p.string();
-  }
-  throw std::runtime_error("no image for view " + std::to_string(id) + " in " + images_dir + " (expected " +
-                           view_file_stem(id) + ".jpg or .png)");
-}
 
 }  // namespace umvs

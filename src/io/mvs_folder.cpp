@@ -1,7 +1,5 @@
 #include "unsup_mvs/io/mvs_folder.h"
 
-#include "unsup_mvs/io/inference_folder.h"
-
 #include <atomic>
 #include <cmath>
 #include <cstdio>
@@ -199,6 +197,15 @@ MvsView MvsFolder::load_view(int id) const {
   view.cam.camera.height = static_cast<int>(view.image.size(0));
   view.cam.camera.width = static_cast<int>(view.image.size(1));
   return view;
+}
+
+std::string find_view_image(const std::string& images_dir, int id) {
+  for (const char* ext : {".jpg", ".png", ".jpeg", ".JPG", ".PNG"}) {
+    const auto p = fs::path(images_dir) / (view_file_stem(id) + ext);
+    if (fs::exists(p)) return p.string();
+  }
+  throw std::runtime_error("no image for view " + std::to_string(id) + " in " + images_dir + " (expected " +
+                           view_file_stem(id) + ".jpg or .png)");
 }
 
 }  // namespace umvs

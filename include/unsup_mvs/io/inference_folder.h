@@ -37,8 +37,4 @@ class InferenceFolder {
   std::string root_;
 };
 
-// The image file of view `id` in an images/ folder: XXXXXXXX with the first of .jpg, .png, .jpeg,
-// .JPG, .PNG that exists. Throws std::runtime_error naming the folder when there is none.
-std::string find_view_image(const std::string& images_dir, int id);
-
 }  // namespace umvs

@@ -64,4 +64,8 @@ class MvsFolder {
 
 std::string view_file_stem(int id);  // 8-digit zero-padded id
 
+// The image file of view `id` in an images/ folder: XXXXXXXX with the first of .jpg, .png, .jpeg,
+// .JPG, .PNG that exists. Throws std::runtime_error naming the folder when there is none.
+std::string find_view_image(const std::string& images_dir, int id);
+
 }  // namespace umvs
