@@ -376,32 +376,4 @@ TEST(BagTraining, UmvsTrainReadsTheBagWithTheSelectorSettingsItIsGiven) {
   EXPECT_EQ(keyframes_reported(umvs::keyframe_stream_train_args(fine), "fine"), static_cast<int>(fine_expected));
 }
 
-// Every field of the stream config survives the trip through the command line.
-TEST(BagTraining, KeyframeStreamArgumentsCarryEveryField) {
-  umvs::KeyframeStreamConfig c;
-  c.rectified = false;
-  c.keyframes.min_translation = 0.123456789;
-  c.keyframes.min_rotation_deg = 7.5;
-  c.keyframes.min_pose_distance = 0.2;
-  c.keyframes.buffer_size = 12;
-  c.keyframes.min_score = 0.25;
-  c.keyframes.score_grid = 9;
-  c.depth_min = 0.45;
-  c.depth_max = 12.5;
-  const auto args = umvs::keyframe_stream_train_args(c);
-  std::map<std::string, std::string> v;
-  ASSERT_EQ(args.size() % 2, 0u);
-  for (size_t i = 0; i < args.size(); i += 2) v[args[i]] = args[i + 1];
-  EXPECT_EQ(v.at("--rectified"), "0");
-  EXPECT_DOUBLE_EQ(std::stod(v.at("--min-translation")), 0.123456789);
-  EXPECT_DOUBLE_EQ(std::stod(v.at("--min-rotation-deg")), 7.5);
-  EXPECT_DOUBLE_EQ(std::stod(v.at("--min-pose-distance")), 0.2);
-  EXPECT_EQ(v.at("--keyframe-buffer"), "12");
-  EXPECT_DOUBLE_EQ(std::stod(v.at("--min-view-score")), 0.25);
-  EXPECT_EQ(v.at("--view-score-grid"), "9");
-  EXPECT_DOUBLE_EQ(std::stod(v.at("--depth-min")), 0.45);
-  EXPECT_DOUBLE_EQ(std::stod(v.at("--depth-max")), 12.5);
-  EXPECT_EQ(v.size(), 9u);
-}
-
 }  // namespace
