@@ -13,6 +13,7 @@
 #include <string>
 
 #include "test_util.h"
+#include "unsup_mvs/io/run_folder.h"
 
 namespace umvs::test {
 
@@ -39,6 +40,9 @@ inline Result run_shell(const std::string& command, const std::string& redirect 
 inline Result run_umvs(const std::string& args, const std::string& redirect = "2>&1") {
   return run_shell(umvs_binary() + " " + args, redirect);
 }
+
+// The options recorded in run folder `out` (its run_config.json).
+inline RunOptions recorded(const std::string& out) { return read_run_record(out).value().options; }
 
 inline bool contains(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
 

@@ -7,7 +7,7 @@
 namespace umvs {
 namespace {
 
-Camera camera_at(double x, int w = 64, int h = 48) {
+Camera camera_at_x(double x, int w = 64, int h = 48) {
   Camera c;
   c.width = w;
   c.height = h;
@@ -36,7 +36,7 @@ TEST(DepthHypotheses, UniformAndInverse) {
 TEST(HomographyWarp, IdenticalCamerasReturnTheFeatures) {
   torch::manual_seed(1);
   auto fea = torch::rand({1, 4, 12, 16});
-  auto P = mvsnet_projection_matrix(camera_at(0.0)).unsqueeze(0);
+  auto P = mvsnet_projection_matrix(camera_at_x(0.0)).unsqueeze(0);
   auto dv = depth_hypotheses(1.0, 5.0, 8, DepthSampling::kUniformDepth).unsqueeze(0);
   auto warped = homography_warp(fea, P, P, dv, FeatureWarp::kExact);
   ASSERT_EQ(warped.sizes(), (std::vector<int64_t>{1, 4, 8, 12, 16}));
@@ -51,7 +51,7 @@ TEST(HomographyWarp, IdenticalCamerasReturnTheFeatures) {
 TEST(HomographyWarp, FrontoParallelPlaneShiftsByDisparity) {
   // A source camera translated by b along x sees a plane at depth z shifted by f*b/z pixels.
   const int W = 64, H = 48;
-  auto ref = camera_at(0.0, W, H), src = camera_at(0.2, W, H);
+  auto ref = camera_at_x(0.0, W, H), src = camera_at_x(0.2, W, H);
   auto dv = torch::tensor({2.5f}).view({1, 1});
   auto dv8 = dv.expand({1, 8}).contiguous();
   // A horizontal ramp image: the warped value tells where the sample came from.
@@ -88,7 +88,7 @@ TEST(HomographyWarp, PointsOnTheSourceCameraPlaneSampleNothingInsteadOfNaN) {
 TEST(InverseWarp, RecoversTheReferenceFromATranslatedView) {
   // A source image made of a smooth pattern; the reference is the source warped with known depth.
   const int W = 40, H = 30;
-  auto ref = camera_at(0.0, W, H), src = camera_at(0.1, W, H);
+  auto ref = camera_at_x(0.0, W, H), src = camera_at_x(0.1, W, H);
   auto xs = torch::arange(W, torch::kFloat32).view({1, W}).expand({H, W});
   auto ys = torch::arange(H, torch::kFloat32).view({H, 1}).expand({H, W});
   auto pattern = [](const torch::Tensor& x, const torch::Tensor& y) { return torch::sin(x * 0.3) + torch::cos(y * 0.2); };
@@ -110,7 +110,7 @@ TEST(InverseWarp, RecoversTheReferenceFromATranslatedView) {
 
 TEST(InverseWarp, GradientFlowsIntoDepth) {
   const int W = 16, H = 12;
-  auto ref = camera_at(0.0, W, H), src = camera_at(0.1, W, H);
+  auto ref = camera_at_x(0.0, W, H), src = camera_at_x(0.1, W, H);
   auto src_img = torch::rand({1, 1, H, W});
   auto depth = torch::full({1, H, W}, 2.0, torch::requires_grad());
   auto out = inverse_warp(src_img, intrinsics_tensor(ref).unsqueeze(0), intrinsics_tensor(src).unsqueeze(0),
@@ -158,7 +158,7 @@ TEST(MvsNet, ForwardShapesAndRefinementChangesDepth) {
   cfg.refine = true;
   MvsNet net(cfg);
   net->eval();
-  std::vector<Camera> cams = {camera_at(0.0, 64, 32), camera_at(0.1, 64, 32), camera_at(-0.1, 64, 32)};
+  std::vector<Camera> cams = {camera_at_x(0.0, 64, 32), camera_at_x(0.1, 64, 32), camera_at_x(-0.1, 64, 32)};
   auto images = torch::rand({1, 3, 3, 32, 64});
   auto proj = mvsnet_projection_matrices(cams).unsqueeze(0);
   auto dv = depth_hypotheses(1.0, 4.0, 16, DepthSampling::kUniformDepth).unsqueeze(0);

@@ -18,7 +18,7 @@
 namespace umvs {
 namespace {
 
-void write_text(const std::string& path, const std::string& text) { std::ofstream(path) << text; }
+using test::write_text;
 
 TEST(ArrayIo, NpyRoundTrip) {
   const auto dir = test::temp_dir("npy");

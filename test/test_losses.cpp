@@ -15,7 +15,7 @@ namespace {
 constexpr int kW = 64, kH = 48;
 constexpr double kFocal = 60.0;
 
-Camera camera_at(double x, double y, int w = kW, int h = kH) {
+Camera camera_at_xy(double x, double y, int w = kW, int h = kH) {
   Camera c;
   c.width = w;
   c.height = h;
@@ -61,11 +61,11 @@ struct LossInputs {
 };
 
 LossInputs make_inputs(const PlaneScene& scene, const std::vector<std::pair<double, double>>& offsets) {
-  const Camera ref = camera_at(0, 0);
+  const Camera ref = camera_at_xy(0, 0);
   auto [ref_img, depth] = scene.render(ref);
   std::vector<torch::Tensor> srcs, ks, ts;
   for (auto [x, y] : offsets) {
-    const Camera c = camera_at(x, y);
+    const Camera c = camera_at_xy(x, y);
     srcs.push_back(scene.render(c).first);
     ks.push_back(intrinsics_tensor(c));
     ts.push_back(relative_pose_tensor(ref, c));
@@ -151,11 +151,11 @@ TEST(Losses, GradientWithRespectToDepthMatchesFiniteDifferences) {
   PlaneScene scene;
   scene.occluder = true;
   const int w = 20, h = 16;
-  const Camera ref = camera_at(0, 0, w, h);
+  const Camera ref = camera_at_xy(0, 0, w, h);
   auto render = [&](const Camera& c) { return scene.render(c).first.to(torch::kFloat64); };
   std::vector<torch::Tensor> srcs, ks, ts;
   for (auto [x, y] : std::vector<std::pair<double, double>>{{0.2, 0}, {-0.2, 0.05}, {0, 0.15}}) {
-    const Camera c = camera_at(x, y, w, h);
+    const Camera c = camera_at_xy(x, y, w, h);
     srcs.push_back(render(c));
     ks.push_back(intrinsics_tensor(c).to(torch::kFloat64));
     ts.push_back(relative_pose_tensor(ref, c).to(torch::kFloat64));

@@ -7,7 +7,7 @@
 namespace umvs {
 namespace {
 
-Camera camera_at(const Eigen::Vector3d& center, const Eigen::Matrix3d& R_world_to_cam = Eigen::Matrix3d::Identity()) {
+Camera camera_from(const Eigen::Vector3d& center, const Eigen::Matrix3d& R_world_to_cam = Eigen::Matrix3d::Identity()) {
   Camera c;
   c.K << 100, 0, 31.5, 0, 100, 23.5, 0, 0, 1;
   c.width = 64;
@@ -18,17 +18,17 @@ Camera camera_at(const Eigen::Vector3d& center, const Eigen::Matrix3d& R_world_t
 }
 
 TEST(Parallax, ShiftMatchesTheStereoFormulaAndVanishesForARotation) {
-  const Camera ref = camera_at(Eigen::Vector3d::Zero());
+  const Camera ref = camera_from(Eigen::Vector3d::Zero());
   const auto depth = torch::full({48, 64}, 2.0f);
   // A source 10 cm to the side: a depth d -> 1.1 d moves the centre pixel by f b (1/d - 1/1.1d).
-  const Camera side = camera_at(Eigen::Vector3d(0.1, 0, 0));
+  const Camera side = camera_from(Eigen::Vector3d(0.1, 0, 0));
   const auto shift = parallax_shift_px(depth, ref, {side}, 0.1);
   EXPECT_NEAR(shift[23][31].item<float>(), 100 * 0.1 * (1 / 2.0 - 1 / 2.2), 1e-4);
   // The same camera turned in place: no parallax anywhere.
-  const Camera turned = camera_at(Eigen::Vector3d::Zero(), Eigen::AngleAxisd(0.2, Eigen::Vector3d::UnitY()).toRotationMatrix());
+  const Camera turned = camera_from(Eigen::Vector3d::Zero(), Eigen::AngleAxisd(0.2, Eigen::Vector3d::UnitY()).toRotationMatrix());
   EXPECT_LT(parallax_shift_px(depth, ref, {turned}, 0.1).max().item<float>(), 1e-4);
   // A source moved along the optical axis: no shift at the principal point, some at the edges.
-  const Camera forward = camera_at(Eigen::Vector3d(0, 0, 0.1));
+  const Camera forward = camera_from(Eigen::Vector3d(0, 0, 0.1));
   const auto along = parallax_shift_px(depth, ref, {forward}, 0.1);
   EXPECT_LT(along[23][31].item<float>(), 0.01f);  // half a pixel off the principal point
   // The corner, 39.3 px from it: 39.3 (2 / 1.9 - 2.2 / 2.1) = 0.197 px.

@@ -7,9 +7,8 @@
 
 #include <cmath>
 #include <filesystem>
-#include <fstream>
-#include <sstream>
 
+#include "cli_test_util.h"
 #include "test_util.h"
 #include "unsup_mvs/io/cloud_file.h"
 #include "unsup_mvs/io/cloud_filter.h"
@@ -19,12 +18,7 @@
 namespace umvs {
 namespace {
 
-std::string file_bytes(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
+using test::file_bytes;
 
 // A 20 x 20 grid on z = 0 (spacing 1 cm, offset half a cell so that 2 cm voxels split it evenly),
 // each point with its own colour, confidence and view count.

@@ -29,7 +29,7 @@ std::string read_text(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   return std::string(std::istreambuf_iterator<char>(in), {});
 }
-void write_text(const std::string& path, const std::string& text) { std::ofstream(path) << text; }
+using test::write_text;
 void write_hello(const std::string& path) {
   write_file_atomically(path, [](std::ostream& out) { out << "hello"; });
 }

@@ -23,8 +23,7 @@ using test::default_model;
 using test::file_bytes;
 using test::write_room;
 
-// The options recorded in run folder `out` (its run_config.json).
-RunOptions recorded(const std::string& out) { return read_run_record(out).value().options; }
+using test::recorded;
 
 TEST(SelfTraining, AnchoredRunKeepsItsStartModelAndResumesWithinARoundExactly) {
   const std::string data = write_room("anchored_run", 52, false);

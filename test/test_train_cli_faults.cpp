@@ -26,8 +26,7 @@ using test::scene;
 using test::snapshot;
 using test::write_bytes;
 
-// The options recorded in run folder `out` (its run_config.json).
-RunOptions recorded(const std::string& out) { return read_run_record(out).value().options; }
+using test::recorded;
 
 // ---------------------------------------------------------------------------------------------
 // umvs train: run folders and arguments

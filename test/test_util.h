@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
 #include <string>
 
 #include "scratch_dirs.h"
@@ -22,6 +23,9 @@ inline std::string shared_data_dir() {
   const auto p = std::filesystem::path(UMVS_SOURCE_DIR).parent_path() / "shared" / "data";
   return std::filesystem::is_directory(p) ? std::filesystem::canonical(p).string() : "";
 }
+
+// Writes `text` to `path`, replacing it.
+inline void write_text(const std::string& path, const std::string& text) { std::ofstream(path) << text; }
 
 // A fresh, empty temporary folder for one test.
 inline std::string temp_dir(const std::string& name) { return umvs_scratch::scratch_dir("umvs_test_", name); }

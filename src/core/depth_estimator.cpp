@@ -42,7 +42,6 @@ MvsNet moved_to(MvsNet model, const torch::Device& device) {
   return model;
 }
 
-constexpr double kRadiansPerDegree = M_PI / 180.0;
 // A 3x3 window whose intensities spread less than one grey level tells the turn search nothing.
 constexpr double kMinTextureStd = 1.0 / 255;
 

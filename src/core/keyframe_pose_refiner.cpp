@@ -9,8 +9,6 @@ namespace umvs {
 
 namespace {
 
-constexpr double kRadiansPerDegree = M_PI / 180.0;
-
 // Whether two cameras are the same pose and calibration, up to rounding on the way through messages.
 bool same_camera(const Camera& a, const Camera& b) {
   constexpr double kTolerance = 1e-7;

@@ -19,8 +19,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-constexpr double kRadiansPerDegree = M_PI / 180.0;
-
 void check_output_folder(const std::string& data_dir, const std::string& out_dir) {
   if (out_dir.empty()) throw std::invalid_argument("no output folder given");
   std::error_code ec;

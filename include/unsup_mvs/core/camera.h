@@ -14,6 +14,8 @@
 
 namespace umvs {
 
+constexpr double kRadiansPerDegree = 3.14159265358979323846 / 180.0;  // for Camera::turned
+
 struct Camera {
   Eigen::Matrix3d K = Eigen::Matrix3d::Identity();
   Eigen::Matrix4d T_cam_world = Eigen::Matrix4d::Identity();
