@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cerrno>
 #include <climits>
+#include <cmath>
 #include <cstdlib>
 #include <iostream>
 #include <sstream>
@@ -157,6 +158,24 @@ Args& Args::bind(const std::string& name, std::vector<std::string>* field, const
   });
   return *this;
 }
+Args& Args::bind(const std::string& name, std::vector<double>* field, const std::string& help) {
+  std::string joined;
+  for (double v : *field) joined += (joined.empty() ? "" : ",") + number_text(v);
+  declare(name, joined, help, Kind::kText);
+  write_bound_.push_back([name, field](const Args& a) {
+    if (a.given(name)) *field = a.reals(name);
+  });
+  return *this;
+}
+Args& Args::bind(const std::string& name, std::vector<int>* field, const std::string& help) {
+  std::string joined;
+  for (int v : *field) joined += (joined.empty() ? "" : ",") + std::to_string(v);
+  declare(name, joined, help, Kind::kText);
+  write_bound_.push_back([name, field](const Args& a) {
+    if (a.given(name)) *field = a.integers(name);
+  });
+  return *this;
+}
 Args& Args::bind_repeated(const std::string& name, std::vector<std::string>* field, const std::string& help) {
   bind(name, field, help);
   app_->get_option("--" + name)->multi_option_policy(CLI::MultiOptionPolicy::TakeAll)->description(help + " (repeatable)");
@@ -277,6 +296,19 @@ std::vector<std::string> Args::all(const std::string& name) const {
     for (std::string part; std::getline(ss, part, ',');) {
       if (!part.empty()) out.push_back(part);
     }
+  }
+  return out;
+}
+
+std::vector<double> Args::reals(const std::string& name) const {
+  std::vector<double> out;
+  for (const auto& s : all(name)) {
+    char* end = nullptr;
+    const double v = std::strtod(s.c_str(), &end);
+    if (end != s.c_str() + s.size() || !std::isfinite(v)) {
+      throw std::invalid_argument("option --" + name + " needs comma-separated numbers, got '" + s + "'");
+    }
+    out.push_back(v);
   }
   return out;
 }

@@ -50,6 +50,8 @@ class Args {
   Args& bind(const std::string& name, bool* field, const std::string& help);
   Args& bind(const std::string& name, std::optional<int>* field, const std::string& help);
   Args& bind(const std::string& name, std::vector<std::string>* field, const std::string& help);
+  Args& bind(const std::string& name, std::vector<double>* field, const std::string& help);  // comma-separated
+  Args& bind(const std::string& name, std::vector<int>* field, const std::string& help);     // comma-separated
   Args& bind_repeated(const std::string& name, std::vector<std::string>* field, const std::string& help);
   Args& flag(const std::string& name, bool* field, const std::string& help);
   // An earlier spelling of a declared option: still taken, as `name`, with a note on stderr that
@@ -69,6 +71,7 @@ class Args {
   bool on(const std::string& name) const;  // for flags
   std::vector<std::string> all(const std::string& name) const;  // repeated or comma-separated
   std::vector<int> integers(const std::string& name) const;     // comma-separated ints
+  std::vector<double> reals(const std::string& name) const;     // comma-separated finite numbers
 
   std::string usage() const;  // CLI11's help text
   const std::vector<std::string>& names() const { return order_; }  // declared options, in order
