@@ -26,7 +26,7 @@ const std::string kOnlyStdout = "2>/dev/null", kOnlyStderr = "2>&1 >/dev/null";
 TEST(CliHelp, EverySubcommandPrintsCli11HelpWithItsDefaults) {
   // Each subcommand with one option as its help must show it: name, value type and default.
   std::map<std::string, std::string> shown = {
-      {"bench", "--width NUMBER=640"},
+      {"bench", "--width INT=640"},              // bound to an int field: INT
       {"eval depth", "--rel-thresholds TEXT=0.01,0.03"},
       {"eval cloud", "--thresholds TEXT=0.002,0.005,0.01"},
       {"fuse", "--window NUMBER=10"},
