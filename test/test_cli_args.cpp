@@ -29,7 +29,7 @@ TEST(CliHelp, EverySubcommandPrintsCli11HelpWithItsDefaults) {
       {"bench", "--width INT=640"},              // bound to an int field: INT
       {"eval depth", "--rel-thresholds TEXT=0.01,0.03"},
       {"eval cloud", "--thresholds TEXT=0.002,0.005,0.01"},
-      {"fuse", "--window NUMBER=10"},
+      {"fuse", "--window INT=10"},
       {"import middlebury", "--margin NUMBER=0.1"},
       {"import rgbd", "--num-depth INT=192"},  // an integer field: INT
       {"infer", "--device TEXT=cpu"},
