@@ -9,7 +9,10 @@
 # Environment: SOAK_MINUTES (60), SOAK_SAMPLE_SECONDS (60), SOAK_WARMUP_MINUTES (10),
 #              SOAK_TOLERANCE_MB (32: the smallest memory rise that fails), SOAK_IMAGE_RATE (30 Hz),
 #              SOAK_WIDTH x SOAK_HEIGHT (640 x 512: the camera; inference at config/inference.yaml's size),
-#              SOAK_VIEWS (24), SOAK_BUILD (1; 0 = use the build as it is), CHECKPOINT (default model),
+#              SOAK_VIEWS (24), SOAK_MAX_POINTS (100000: the fused map's cap, which the map reaches in
+#              its first minute, so that what the soak watches after warm-up is every node's memory
+#              around a full map; empty = the node's default, 2,000,000, reached after hours),
+#              SOAK_BUILD (1; 0 = use the build as it is), CHECKPOINT (default model),
 #              SOAK_ROS_PORT (11417), UMVS_DEVEL (the build's devel space: build/devel).
 # CI runs it for 3 minutes (ctest -R soak).
 set -euo pipefail
@@ -24,6 +27,7 @@ RATE=${SOAK_IMAGE_RATE:-30}
 WIDTH=${SOAK_WIDTH:-640}
 HEIGHT=${SOAK_HEIGHT:-512}
 VIEWS=${SOAK_VIEWS:-24}
+MAX_POINTS=${SOAK_MAX_POINTS-100000}
 CHECKPOINT=$(realpath "${CHECKPOINT:-$ROOT/models/unsup_mvsnet.pt}")
 start=$(date +%s)
 say() { echo "[soak $(($(date +%s) - start))s] $*"; }
@@ -56,9 +60,11 @@ cleanup() {
   for p in "${pids[@]}"; do kill -9 "$p" 2>/dev/null || true; done
 }
 trap cleanup EXIT
-say "pipeline.launch with $CHECKPOINT (log: $WORK/launch.log)"
+cp config/fusion.yaml "$WORK/fusion.yaml"
+[[ -n "$MAX_POINTS" ]] && echo "max_points: $MAX_POINTS" >>"$WORK/fusion.yaml"
+say "pipeline.launch with $CHECKPOINT, the map capped at ${MAX_POINTS:-the default} points (log: $WORK/launch.log)"
 roslaunch -p "${ROS_MASTER_URI##*:}" unsup_mvs pipeline.launch checkpoint:="$CHECKPOINT" clouds_dir:="$WORK/clouds" \
-  models_dir:="$WORK/models" >"$WORK/launch.log" 2>&1 &
+  models_dir:="$WORK/models" fusion_config:="$WORK/fusion.yaml" >"$WORK/launch.log" 2>&1 &
 pids+=($!)
 until rosservice list 2>/dev/null | grep -q /unsup_mvs/inference/stats; do
   kill -0 "${pids[0]}" 2>/dev/null || { tail -30 "$WORK/launch.log"; echo "pipeline.launch did not start" >&2; exit 1; }
